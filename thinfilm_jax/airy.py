@@ -1,0 +1,101 @@
+r"""Exact reflectance of one film by Airy summation (SPEC §2).
+
+Per polarisation, with the amplitudes of `fresnel.film_interfaces` and the round-trip
+phase δ = 2β = 4π d q₂ / λ = 2π D / λ (D = 2 η₂ d cos θ₂, K 5):
+
+$$ r = \frac{r_{12} + r_{23} e^{i\delta}}{1 + r_{12} r_{23} e^{i\delta}},\qquad
+   R = \tfrac12\left(|r_s|^2 + |r_p|^2\right). $$
+
+On the dielectric path the amplitudes are real and this is evaluated as
+R = (R₁₂ + R₂₃ + 2r₁₂r₂₃ cos δ)/(1 + R₁₂R₂₃ + 2r₁₂r₂₃ cos δ) — one cosine per wavelength.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from . import _validate as V
+from .film import Film
+from .fresnel import Interfaces, film_interfaces
+
+
+def choose_base(film: Film, base: str = "auto") -> str:
+    """Resolve ``base="auto"``: the real dielectric path when the (concrete) film allows it.
+
+    The dielectric path needs κ₃ = 0, η₂ ≥ η₁ and η₃ ≥ η₁ (no TIR). With traced fields
+    (inside `jit`) "auto" cannot look at the values and takes the general path; pass
+    ``base="dielectric"`` explicitly to specialise a jitted dielectric scene.
+    """
+    if base != "auto":
+        V.check_choice("base", base, ("dielectric", "general"))
+        return base
+    if not all(V.is_concrete(x) for x in film):
+        return "general"
+    import numpy as np
+
+    k, e1, e2, e3 = (np.asarray(x) for x in (film.kappa_base, film.eta_outer, film.eta_film,
+                                             film.eta_base))
+    if np.all(k == 0) and np.all(e2 >= e1) and np.all(e3 >= e1):
+        return "dielectric"
+    return "general"
+
+
+def polarised_reflectance(ifc: Interfaces, thickness, wavelength) -> Array:
+    """R_s, R_p (leading axis 2) from interface amplitudes at wavelength λ (nm)."""
+    delta = 4.0 * jnp.pi * thickness * ifc.q2 / wavelength
+    r12, r23 = ifc.r12, ifc.r23
+    if not jnp.iscomplexobj(r12):
+        x = 2.0 * r12 * r23 * jnp.cos(delta)
+        r12sq, r23sq = r12 * r12, r23 * r23
+        num = r12sq + r23sq + x
+        den = 1.0 + r12sq * r23sq + x
+    else:
+        e = jnp.exp(1j * delta)
+        a = r12 + r23 * e
+        b = 1.0 + r12 * r23 * e
+        num = jnp.real(a) ** 2 + jnp.imag(a) ** 2
+        den = jnp.real(b) ** 2 + jnp.imag(b) ** 2
+    # den = 0 only if |r12 r23 e^{iδ}| = 1 with opposite phase (grazing, TIR corner): R → 1.
+    zero = den == 0
+    return jnp.where(zero, 1.0, num / jnp.where(zero, 1.0, den))
+
+
+def airy_reflectance(film: Film, cos_theta, wavelength, *, base: str = "auto") -> Array:
+    """Unpolarised reflectance R(θ₁, λ) of `film` (SPEC §2, exact).
+
+    Args:
+        film: `Film`; fields broadcast with the other arguments.
+        cos_theta: cos θ₁ ∈ [0, 1] in the outer medium.
+        wavelength: λ in nm (> 0).
+        base: "auto" | "dielectric" | "general" (see `choose_base`).
+
+    Returns:
+        R with the broadcast shape of all arguments, dtype following the inputs.
+
+    Example:
+        >>> float(airy_reflectance(Film(0.0, 1.5, 1.5), 1.0, 550.0))  # bare glass, 4 %
+        0.04
+    """
+    V.check_film(film)
+    V.check_cos_theta(cos_theta)
+    V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
+    V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta),
+                       ("wavelength", wavelength)])
+    return _airy_jit(film, cos_theta, wavelength, choose_base(film, base))
+
+
+@functools.partial(jax.jit, static_argnames="base")
+def _airy_jit(film, cos_theta, wavelength, base):
+    film, cos_theta, wavelength = broadcast_all(film, cos_theta, wavelength)
+    ifc = film_interfaces(film, cos_theta, base=base)
+    return jnp.mean(polarised_reflectance(ifc, film.thickness, wavelength), axis=0)
+
+
+def broadcast_all(film: Film, *args):
+    """Broadcast every film field and every extra argument to one common shape."""
+    arrays = jnp.broadcast_arrays(*film, *args)
+    return (Film(*arrays[:5]), *arrays[5:])

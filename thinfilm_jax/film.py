@@ -1,0 +1,40 @@
+"""The `Film` pytree: one dielectric film on a (possibly absorbing) base.
+
+Conventions (SPEC §1): thickness in nm, real refractive indices for the outer medium
+(η₁) and the film (η₂), complex index η₃ + iκ₃ for the base. `Film` is a NamedTuple,
+hence a JAX pytree: `jax.grad` with respect to a `Film` returns a `Film` of gradients,
+and any field may be an array (fields broadcast against each other and against the
+angle/wavelength arguments of the functions that take a film).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax.typing import ArrayLike
+
+
+class Film(NamedTuple):
+    """A film of thickness `thickness` (nm) and index `eta_film` on a base `eta_base + i kappa_base`,
+    seen from an outer medium of index `eta_outer`.
+
+    Example:
+        >>> Film(600.0, 1.3, 2.0, 0.5)  # the Figure 2/7 film of Kneiphof et al. 2019
+        Film(thickness=600.0, eta_film=1.3, eta_base=2.0, kappa_base=0.5, eta_outer=1.0)
+    """
+
+    thickness: ArrayLike
+    eta_film: ArrayLike
+    eta_base: ArrayLike
+    kappa_base: ArrayLike = 0.0
+    eta_outer: ArrayLike = 1.0
+
+    def astype(self, dtype) -> Film:
+        """All fields as arrays of `dtype` (e.g. to run a real-time path in float32)."""
+        return Film(*(jnp.asarray(x, dtype) for x in self))
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The broadcast shape of the fields."""
+        return jnp.broadcast_shapes(*(jnp.shape(x) for x in self))

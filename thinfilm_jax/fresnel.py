@@ -1,0 +1,108 @@
+r"""Fresnel amplitudes at the two interfaces of a film (outer 1 | film 2 | base 3).
+
+Everything is written with the *normal wavenumbers* $q_k = \eta_k\cos\theta_k
+= \sqrt{\eta_k^2 - \eta_1^2\sin^2\theta_1}$ (Snell's law is built in, no division by η),
+with the branch $\operatorname{Im} q_k \ge 0$ so that waves in absorbing or evanescent
+media decay (SPEC §2). In these variables (Born & Wolf §1.5; the `tmm` sign convention)
+
+$$ r^s_{ab} = \frac{q_a - q_b}{q_a + q_b}, \qquad
+   r^p_{ab} = \frac{\varepsilon_b q_a - \varepsilon_a q_b}{\varepsilon_b q_a + \varepsilon_a q_b},
+   \qquad \varepsilon = \eta^2 . $$
+
+Two arithmetic paths, chosen statically ("a scene pays only for what it needs"):
+
+* ``base="dielectric"``: real arithmetic. Valid when κ₃ = 0 and there is no total
+  internal reflection anywhere (η₂ ≥ η₁ and η₃ ≥ η₁); amplitudes are real and signed.
+* ``base="general"``: complex arithmetic; absorbing bases (κ₃ > 0), TIR at either
+  interface (η₁ > η₂ or η₁ > η₃) and evanescent films.
+
+Singular points are guarded with the double-where pattern so that values *and*
+gradients stay finite at θ₁ = 90° (q₁ = 0), at η₂ = η₁ (no 1|2 interface) and at
+q = 0 (critical angle).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from .film import Film
+
+BASES = ("dielectric", "general")
+
+
+def safe_sqrt(x: Array) -> Array:
+    """√x for x ≥ 0 with a finite (zero) gradient at x = 0 (double-where)."""
+    pos = x > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+
+
+def sqrt_upper(z: Array) -> Array:
+    """Complex √z on the branch Im ≥ 0, finite gradient at z = 0 (double-where)."""
+    zero = z == 0
+    w = jnp.sqrt(jnp.where(zero, 1.0, z))
+    w = jnp.where(jnp.imag(w) < 0, -w, w)
+    return jnp.where(zero, 0.0, w)
+
+
+def safe_div(num: Array, den: Array, limit=0.0) -> Array:
+    """num/den, `limit` where den == 0 (double-where)."""
+    zero = den == 0
+    return jnp.where(zero, limit, num / jnp.where(zero, 1.0, den))
+
+
+def sin2_outer(eta_outer, cos_theta) -> Array:
+    """η₁² sin²θ₁, computed as η₁²(1−c)(1+c) to keep precision near normal incidence."""
+    return eta_outer**2 * (1.0 - cos_theta) * (1.0 + cos_theta)
+
+
+def interface_amplitudes(qa, qb, eps_a, eps_b) -> Array:
+    """Fresnel amplitudes (r_s, r_p) stacked on a leading axis of size 2.
+
+    Where both wavenumbers vanish (identical media at grazing incidence) there is no
+    interface and the amplitude is 0.
+    """
+    rs = safe_div(qa - qb, qa + qb)
+    rp = safe_div(eps_b * qa - eps_a * qb, eps_b * qa + eps_a * qb)
+    return jnp.stack(jnp.broadcast_arrays(rs, rp))
+
+
+class Interfaces(NamedTuple):
+    """Amplitudes of one film at one angle; leading axis of r12, r23 is (s, p)."""
+
+    r12: Array  # outer → film
+    r23: Array  # film → base
+    q2: Array  # η₂ cos θ₂ (real on the dielectric path)
+
+
+def film_interfaces(film: Film, cos_theta, *, base: str = "general") -> Interfaces:
+    """Fresnel amplitudes r₁₂, r₂₃ and the film's normal wavenumber q₂ at cos θ₁.
+
+    Args:
+        film: the film (fields broadcast with `cos_theta`).
+        cos_theta: cos θ₁ in [0, 1], angle of incidence in the outer medium.
+        base: "dielectric" (real arithmetic, no TIR, κ₃ ignored) or "general".
+    """
+    eta1, eta2, eta3, kappa3 = film.eta_outer, film.eta_film, film.eta_base, film.kappa_base
+    c = jnp.asarray(cos_theta)
+    s2 = sin2_outer(eta1, c)
+    q1 = eta1 * c
+    if base == "dielectric":
+        q2 = safe_sqrt(eta2**2 - s2)
+        q3 = safe_sqrt(eta3**2 - s2)
+        eps3 = eta3**2
+    elif base == "general":
+        cdt = jnp.result_type(c, eta2, 1j)
+        n3 = jnp.asarray(eta3 + 1j * kappa3, cdt)
+        eps3 = n3 * n3
+        q2 = sqrt_upper(jnp.asarray(eta2**2 - s2, cdt))
+        q3 = sqrt_upper(eps3 - s2)
+        q1 = jnp.asarray(q1, cdt)
+    else:
+        raise ValueError(f"unknown base {base!r}; expected one of {BASES}")
+    eps1, eps2 = eta1**2, eta2**2
+    r12 = interface_amplitudes(q1, q2, eps1, eps2)
+    r23 = interface_amplitudes(q2, q3, eps2, eps3)
+    return Interfaces(r12, r23, q2)

@@ -1,0 +1,96 @@
+r"""Belcour & Barla 2017 series form of the Airy reflectance (SPEC §3, K 4).
+
+Per polarisation, with R₁₂ = |r₁₂|², R₂₃ = |r₂₃|², T₁₂₁ = 1 − R₁₂, φ₂ = arg r₂₁ + arg r₂₃:
+
+$$ R = C_0 + 2\sum_{m\ge1} C_m\cos(m\Phi),\quad \Phi = 2\pi D/\lambda + \varphi_2,\quad
+   C_0 = R_{12} + R_*,\ R_* = \frac{T_{121}^2 R_{23}}{1 - R_{12}R_{23}},\
+   C_m = (R_* - T_{121})\left(\sqrt{R_{12}R_{23}}\right)^m. $$
+
+We keep the product z = r₂₁ r₂₃ = −r₁₂ r₂₃ instead of (√(R₁₂R₂₃), φ₂): since
+|z| = √(R₁₂R₂₃) and arg z = φ₂, C_m e^{imφ₂} = (R_* − T₁₂₁) z^m exactly. This removes the
+√ and arg singularities at R₁₂ = 0 (η₂ = η₁) or R₂₃ = 0 from values and gradients.
+
+The series equals §2 when the 1|2 interface transmits (η₁ ≤ η₂ sin-wise). Under total
+internal reflection at 1|2 (η₁ > η₂, grazing) T₁₂₁ = 0 and the series gives R = 1, while
+the exact Airy sum keeps frustrated transmission through very thin films: a documented
+limitation of the series (SPEC §3).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from .film import Film
+from .fresnel import film_interfaces, safe_div
+
+
+class SeriesTerms(NamedTuple):
+    """BB17 terms of one film at one angle. Leading axis of c0, amp, z is (s, p)."""
+
+    c0: Array  # C₀ = R₁₂ + R*
+    amp: Array  # R* − T₁₂₁, so that C_m = amp·|z|^m
+    z: Array  # r₂₁ r₂₃ (real on the dielectric path); |z| = √(R₁₂R₂₃), arg z = φ₂
+    opd: Array  # D = 2 η₂ d cos θ₂ (nm), shared by s and p
+
+    @property
+    def phi2(self) -> Array:
+        """φ₂ = arg r₂₁ + arg r₂₃ (0 where z = 0, with a finite gradient)."""
+        zc = jnp.asarray(self.z) + 0j
+        zero = zc == 0
+        return jnp.where(zero, 0.0, jnp.angle(jnp.where(zero, 1.0, zc)))
+
+    def cm(self, m: int) -> Array:
+        """C_m = (R* − T₁₂₁) (√(R₁₂R₂₃))^m, m ≥ 1."""
+        az2 = jnp.real(self.z) ** 2 + jnp.imag(self.z) ** 2
+        return self.amp * az2 ** (m / 2)
+
+
+def series_terms(film: Film, cos_theta, *, base: str = "general") -> SeriesTerms:
+    """C₀, R* − T₁₂₁, z = r₂₁r₂₃ and D of `film` at cos θ₁ (inputs pre-broadcast)."""
+    ifc = film_interfaces(film, cos_theta, base=base)
+    r12, r23 = ifc.r12, ifc.r23
+    R12 = jnp.real(r12) ** 2 + jnp.imag(r12) ** 2
+    R23 = jnp.real(r23) ** 2 + jnp.imag(r23) ** 2
+    T = 1.0 - R12
+    # 1 − R₁₂R₂₃ = 0 only when both interfaces reflect totally: then R* = 0 (T = 0).
+    rstar = safe_div(T * T * R23, 1.0 - R12 * R23)
+    opd = 2.0 * film.thickness * jnp.real(ifc.q2)
+    return SeriesTerms(R12 + rstar, rstar - T, -r12 * r23, opd)
+
+
+def series_reflectance(terms: SeriesTerms, wavelength, terms_m: int) -> Array:
+    """Truncated series R_M(λ) per polarisation (leading axis 2), M = `terms_m`."""
+    e = jnp.exp(2j * jnp.pi * terms.opd / wavelength)
+    zm = jnp.ones_like(terms.z * e)
+    acc = jnp.zeros_like(terms.c0)
+    for _ in range(terms_m):
+        zm = zm * terms.z * e
+        acc = acc + jnp.real(zm)
+    return terms.c0 + 2.0 * terms.amp * acc
+
+
+def fourier_band_reflectance(terms: SeriesTerms, shat, terms_m: int, shat0) -> Array:
+    r"""Band reflectance (K 4 / K 29) per polarisation, leading axis 2, trailing axis bands.
+
+    $$ R_j = C_0\hat S_j(0) + \sum_{m=1}^{M} C_m\left[e^{im\varphi_2}\hat S_j(-mD)
+       + e^{-im\varphi_2}\hat S_j(mD)\right]
+       = C_0\hat S_j(0) + 2(R_*-T_{121})\sum_m \operatorname{Re}\,z^m\hat S_j(-mD), $$
+
+    using Ŝ_j(mD) = conj Ŝ_j(−mD) for real sensitivities.
+
+    Args:
+        terms: `SeriesTerms` (the mean-direction terms C*, φ₂* for K 29).
+        shat: callable m ↦ Ŝ_j(−m μ_D[, m²σ_D²]) with shape (*batch, n_bands), complex.
+        terms_m: M.
+        shat0: Ŝ_j(0), shape (n_bands,).
+    """
+    z = terms.z[..., None]
+    acc = 0.0
+    zm = jnp.ones_like(z)
+    for m in range(1, terms_m + 1):
+        zm = zm * z
+        acc = acc + jnp.real(zm * shat(m))
+    return terms.c0[..., None] * shat0 + 2.0 * terms.amp[..., None] * acc

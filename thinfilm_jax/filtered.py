@@ -1,0 +1,41 @@
+r"""Filtered band reflectance for a Gaussian distribution of the optical path (K 19, K 29).
+
+$$ \int p_R R_j \approx C_0^* + \sum_{m=1}^{M} C_m^*\left[e^{im\varphi_2^*}\hat S_j(-m\mu_D, m^2\sigma_D^2)
+   + e^{-im\varphi_2^*}\hat S_j(m\mu_D, m^2\sigma_D^2)\right], $$
+
+with C*_m, φ₂* the BB17 terms at the mean light direction (cos θ₁*, K 22) and Ŝ the
+Gaussian-filtered sensitivity, either exact (`shat="exact"`, SPEC §5 quadrature) or from
+the LUT (`shat="lut"`, `lut.ShatLUT`). Kneiphof et al. use M = 2.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import Array
+
+from .film import Film
+from .lut import ShatLUT, lookup
+from .opd import OPDMoments
+from .series import fourier_band_reflectance, series_terms
+from .spectra import sensitivity_ft, shat_at_zero
+
+SHAT_SOURCES = ("exact", "lut", "gaussian")
+
+
+def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, terms: int = 2,
+                   shat: str = "exact", lut: ShatLUT | None = None,
+                   base: str = "general") -> Array:
+    """K 29 band reflectance (..., J) for broadcast inputs (no validation; see patch.py)."""
+    st = series_terms(film, cos_mean, base=base)
+    dtype = jnp.result_type(cos_mean, float)
+    mean, std = opd
+    if shat == "lut":
+        def shat_m(m):
+            return lookup(lut, -m * mean, m * std)
+    else:
+        method = "gaussian" if shat == "gaussian" else "tabulated"
+
+        def shat_m(m):
+            return sensitivity_ft(-m * mean, observer, sigma2=(m * std) ** 2, method=method)
+    s0 = shat_at_zero(observer, dtype) if shat != "gaussian" else jnp.ones(3, dtype)
+    return jnp.mean(fourier_band_reflectance(st, shat_m, terms, s0), axis=0)

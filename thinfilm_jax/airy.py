@@ -6,8 +6,8 @@ phase δ = 2β = 4π d q₂ / λ = 2π D / λ (D = 2 η₂ d cos θ₂, K 5):
 $$ r = \frac{r_{12} + r_{23} e^{i\delta}}{1 + r_{12} r_{23} e^{i\delta}},\qquad
    R = \tfrac12\left(|r_s|^2 + |r_p|^2\right). $$
 
-On the dielectric path the amplitudes are real and this is evaluated as
-R = (R₁₂ + R₂₃ + 2r₁₂r₂₃ cos δ)/(1 + R₁₂R₂₃ + 2r₁₂r₂₃ cos δ) — one cosine per wavelength.
+It is evaluated in the expanded real form (see `polarised_reflectance`); on the dielectric
+path the amplitudes are real and R = (R₁₂ + R₂₃ + 2r₁₂r₂₃ cos δ)/(1 + R₁₂R₂₃ + 2r₁₂r₂₃ cos δ).
 """
 
 from __future__ import annotations
@@ -45,20 +45,33 @@ def choose_base(film: Film, base: str = "auto") -> str:
 
 
 def polarised_reflectance(ifc: Interfaces, thickness, wavelength) -> Array:
-    """R_s, R_p (leading axis 2) from interface amplitudes at wavelength λ (nm)."""
-    delta = 4.0 * jnp.pi * thickness * ifc.q2 / wavelength
+    """R_s, R_p (leading axis 2) from interface amplitudes at wavelength λ (nm).
+
+    Expanded real form of |r₁₂ + r₂₃e^{iδ}|² / |1 + r₁₂r₂₃e^{iδ}|² with g = |e^{iδ}|
+    (g = 1 unless the film is evanescent):
+    num = R₁₂ + g²R₂₃ + 2g Re(r̄₁₂r₂₃ e^{iRe δ}), den = 1 + g²R₁₂R₂₃ + 2g Re(r₁₂r₂₃ e^{iRe δ}).
+    The products are formed once per angle; each wavelength costs one cos/sin pair shared
+    by both polarisations.
+    """
     r12, r23 = ifc.r12, ifc.r23
-    if not jnp.iscomplexobj(r12):
-        x = 2.0 * r12 * r23 * jnp.cos(delta)
-        r12sq, r23sq = r12 * r12, r23 * r23
-        num = r12sq + r23sq + x
-        den = 1.0 + r12sq * r23sq + x
+    # δ = k q₂ with real k = 4πd/λ; Re δ and Im δ formed separately (no implicit real →
+    # complex promotion, so this also runs under jax_numpy_dtype_promotion="strict")
+    k = 4.0 * jnp.pi * thickness / wavelength
+    delta_re = k * jnp.real(ifc.q2)
+    cos_d, sin_d = jnp.cos(delta_re), jnp.sin(delta_re)
+    if jnp.iscomplexobj(r12):
+        g = jnp.exp(-(k * jnp.imag(ifc.q2)))
+        R12 = jnp.real(r12) ** 2 + jnp.imag(r12) ** 2
+        R23 = jnp.real(r23) ** 2 + jnp.imag(r23) ** 2
+        b = jnp.conj(r12) * r23
+        p = r12 * r23
+        num = R12 + g * g * R23 + 2.0 * g * (jnp.real(b) * cos_d - jnp.imag(b) * sin_d)
+        den = 1.0 + g * g * R12 * R23 + 2.0 * g * (jnp.real(p) * cos_d - jnp.imag(p) * sin_d)
     else:
-        e = jnp.exp(1j * delta)
-        a = r12 + r23 * e
-        b = 1.0 + r12 * r23 * e
-        num = jnp.real(a) ** 2 + jnp.imag(a) ** 2
-        den = jnp.real(b) ** 2 + jnp.imag(b) ** 2
+        p = r12 * r23
+        x = 2.0 * p * cos_d
+        num = r12 * r12 + r23 * r23 + x
+        den = 1.0 + p * p + x
     # den = 0 only if |r12 r23 e^{iδ}| = 1 with opposite phase (grazing, TIR corner): R → 1.
     zero = den == 0
     return jnp.where(zero, 1.0, num / jnp.where(zero, 1.0, den))

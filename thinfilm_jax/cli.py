@@ -1,0 +1,96 @@
+"""Command line: ``thinfilm-jax figure7 | bench | fit`` (also ``python -m thinfilm_jax``)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+
+
+def _enable_x64():
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+
+
+def _figure7(args) -> int:
+    _enable_x64()
+    from .figures import Figure7Config, run_figure7
+
+    fields = {f.name for f in dataclasses.fields(Figure7Config)}
+    cfg = Figure7Config(**{k: v for k, v in vars(args).items() if k in fields and v is not None})
+    summary = run_figure7(cfg, out_dir=args.out, progress=not args.quiet)
+    print(f"wrote {args.out}/figure7.png, figure7_error.png, figure7.json, figure7.npz "
+          f"in {summary['compute_seconds']:.1f} s")
+    print(f"{'row/method':40s} {'ΔE mean':>8s} {'ΔE p95':>8s} {'ΔE max':>8s}")
+    for k, v in summary["errors_vs_reference"].items():
+        print(f"{k:40s} {v['dE2000_mean']:8.3f} {v['dE2000_p95']:8.3f} {v['dE2000_max']:8.3f}")
+    return 0
+
+
+def _bench(args) -> int:
+    _enable_x64()
+    from .bench import run_bench
+
+    run_bench(out=args.out, quick=args.quick)
+    return 0
+
+
+def _fit(args) -> int:
+    _enable_x64()
+    from .fit_cli import run_fit_cli
+
+    return run_fit_cli(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="thinfilm-jax", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    f7 = sub.add_parser("figure7", help="reproduce Figure 7 of Kneiphof et al. 2019",
+                        description="Render the eight panels (a)-(h) and the ΔE error maps into "
+                                    "--out (figure7.png, figure7_error.png, figure7.json, "
+                                    "figure7.npz). Defaults follow SPEC §7.")
+    f7.add_argument("--out", default="figures", help="output folder (default: figures)")
+    f7.add_argument("--resolution", type=int, help="pixels per panel side (default 64; paper 256)")
+    f7.add_argument("--eta-film", dest="eta_film", type=float, help="film IOR η₂ (1.3)")
+    f7.add_argument("--eta-base", dest="eta_base", type=float, help="base IOR η₃ (2.0)")
+    f7.add_argument("--kappa-base", dest="kappa_base", type=float, help="base κ₃ (0.5)")
+    f7.add_argument("--thickness", type=float, help="film thickness of row (a)-(d), nm (600)")
+    f7.add_argument("--alpha", type=float, help="GGX α of row (e)-(h) (0.25)")
+    f7.add_argument("--thickness-max", dest="thickness_max", type=float,
+                    help="largest thickness of row (e)-(h), nm (1000)")
+    f7.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"])
+    f7.add_argument("--terms", type=int, help="Fourier orders M of the real-time methods (2)")
+    f7.add_argument("--quadrature", type=int, help="half-vector quadrature order per axis (48)")
+    f7.add_argument("--shat", choices=["exact", "lut", "gaussian"],
+                    help="filtered Ŝ source of K 29 (exact)")
+    f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")
+    f7.add_argument("--quiet", action="store_true", help="no progress bar")
+    f7.set_defaults(func=_figure7)
+
+    b = sub.add_parser("bench", help="error against run time of every method and peers",
+                       description="Time every evaluation path (compile time separate from warm "
+                                   "run time) and measure its error; print a table, write JSON.")
+    b.add_argument("--out", default="figures", help="output folder (default: figures)")
+    b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
+    b.set_defaults(func=_bench)
+
+    ft = sub.add_parser("fit", help="fit film parameters to observed patch colours",
+                        description="Fit thickness, IORs and roughness to observations read "
+                                    "from CSV or JSON; write the result as JSON.")
+    ft.add_argument("observations", help="CSV or JSON file of observations")
+    ft.add_argument("--out", required=False, help="result JSON path")
+    ft.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    ft.set_defaults(func=_fit)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

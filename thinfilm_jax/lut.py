@@ -28,10 +28,12 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from .fresnel import complex_dtype
 from .spectra import DEFAULT_OBSERVER, get_observer
 
 
@@ -90,7 +92,7 @@ def build_shat_lut(observer: str = DEFAULT_OBSERVER, *, d_mu: float = 25.0,
     """
     table, carrier, mmax, smax = _build(observer, float(d_mu), int(n_sigma), float(sigma_max),
                                         mu_max)
-    cdt = jnp.result_type(dtype, 1j)
+    cdt = complex_dtype(jnp.zeros((), dtype))
     return ShatLUT(jnp.asarray(table, cdt), jnp.asarray(carrier, dtype),
                    jnp.asarray(mmax, dtype), jnp.asarray(smax, dtype))
 
@@ -115,14 +117,16 @@ def lookup(lut: ShatLUT, mu, sigma) -> Array:
     inside = a <= lut.mu_max
     tm = jnp.minimum(a, lut.mu_max) / lut.mu_max * (n_mu - 1)
     ts = jnp.minimum(sigma, lut.sigma_max) / lut.sigma_max * (n_sig - 1)
-    im = jnp.clip(jnp.floor(tm), 0, n_mu - 2).astype(jnp.int32)
-    is_ = jnp.clip(jnp.floor(ts), 0, n_sig - 2).astype(jnp.int32)
-    wm = _catmull_rom(tm - im).astype(lut.table.dtype)
-    ws = _catmull_rom(ts - is_).astype(lut.table.dtype)
-    off = jnp.arange(4)
+    fm = jnp.clip(jnp.floor(tm), 0, n_mu - 2)
+    fs = jnp.clip(jnp.floor(ts), 0, n_sig - 2)
+    im, is_ = fm.astype(jnp.int32), fs.astype(jnp.int32)
+    wm = _catmull_rom(tm - fm).astype(lut.table.dtype)
+    ws = _catmull_rom(ts - fs).astype(lut.table.dtype)
+    off = jnp.arange(4, dtype=jnp.int32)
     patch = lut.table[(im[..., None] + off)[..., :, None], (is_[..., None] + off)[..., None, :]]
     env = jnp.einsum("...a,...b,...abj->...j", wm, ws, patch)
-    val = env * jnp.exp(-2j * jnp.pi * a[..., None] * lut.carrier)
+    arg = (-2.0 * jnp.pi) * a[..., None] * lut.carrier
+    val = env * jax.lax.complex(jnp.cos(arg), jnp.sin(arg))
     val = jnp.where((mu < 0)[..., None], jnp.conj(val), val)
     return jnp.where(inside[..., None], val, 0.0)
 

@@ -2,11 +2,25 @@
 
 Exact spectral reference (Airy), Belcour & Barla 2017 Fourier-domain band integration,
 Kneiphof et al. 2019 filtered reflectance for rough surfaces, and a uniform-lighting patch
-integrator. See SPEC.md conventions: nm, radians, GGX α, bands of unit area.
+integrator. Conventions (SPEC.md): nm, radians, GGX α, colour bands of unit area.
+
+The public face is this file; modules hold one concept each:
+`fresnel` (interface amplitudes), `airy` (exact R), `series` (BB17 terms), `spectra`
+(observers, Ŝ), `reflectance` (band R_j), `lut` (Ŝ(μ,σ²) table), `opd` (D distribution),
+`filtered` (K 29), `microfacet` (GGX/Smith, patch quadrature), `patch` (SPEC §7 methods),
+`colorimetry` (XYZ/sRGB/ΔE), `figures` (Figure 7), `cli`.
 """
 
 from .airy import airy_reflectance as airy_reflectance
 from .film import Film as Film
+from .lut import ShatLUT as ShatLUT
+from .lut import build_shat_lut as build_shat_lut
+from .microfacet import albedo as albedo
+from .opd import OPDMoments as OPDMoments
+from .opd import taylor_opd_moments as taylor_opd_moments
+from .patch import METHODS as PATCH_METHODS
+from .patch import patch_radiance as patch_radiance
+from .patch import patch_radiance_mc as patch_radiance_mc
 from .reflectance import rgb_reflectance as rgb_reflectance
 from .series import SeriesTerms as SeriesTerms
 from .series import series_terms as series_terms

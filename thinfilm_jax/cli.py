@@ -63,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="largest thickness of row (e)-(h), nm (1000)")
     f7.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"])
     f7.add_argument("--terms", type=int, help="Fourier orders M of the real-time methods (2)")
-    f7.add_argument("--quadrature", type=int, help="half-vector quadrature order per axis (48)")
+    f7.add_argument("--quadrature", type=int, help="half-vector quadrature order per axis (32)")
     f7.add_argument("--shat", choices=["exact", "lut", "gaussian"],
                     help="filtered Ŝ source of K 29 (exact)")
     f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")

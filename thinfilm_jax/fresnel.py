@@ -25,7 +25,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from .film import Film
@@ -45,6 +47,18 @@ def sqrt_upper(z: Array) -> Array:
     w = jnp.sqrt(jnp.where(zero, 1.0, z))
     w = jnp.where(jnp.imag(w) < 0, -w, w)
     return jnp.where(zero, 0.0, w)
+
+
+def complex_dtype(*xs):
+    """The complex dtype matching the real precision of `xs` (float32 → complex64, …)."""
+    return jax.dtypes.canonicalize_dtype(np.result_type(jnp.result_type(*xs, float),
+                                                        np.complex64))
+
+
+def as_complex(x: Array) -> Array:
+    """`x` as a complex array of matching precision (explicit, for strict dtype promotion)."""
+    x = jnp.asarray(x)
+    return x if jnp.iscomplexobj(x) else jax.lax.complex(x, jnp.zeros_like(x))
 
 
 def safe_div(num: Array, den: Array, limit=0.0) -> Array:
@@ -94,15 +108,18 @@ def film_interfaces(film: Film, cos_theta, *, base: str = "general") -> Interfac
         q3 = safe_sqrt(eta3**2 - s2)
         eps3 = eta3**2
     elif base == "general":
-        cdt = jnp.result_type(c, eta2, 1j)
-        n3 = jnp.asarray(eta3 + 1j * kappa3, cdt)
+        # explicit real → complex casts (no implicit promotion: works under "strict")
+        cdt = complex_dtype(c, eta1, eta2, eta3, kappa3)
+        n3 = jnp.asarray(eta3, cdt) + 1j * jnp.asarray(kappa3, cdt)
         eps3 = n3 * n3
         q2 = sqrt_upper(jnp.asarray(eta2**2 - s2, cdt))
-        q3 = sqrt_upper(eps3 - s2)
+        q3 = sqrt_upper(eps3 - jnp.asarray(s2, cdt))
         q1 = jnp.asarray(q1, cdt)
     else:
         raise ValueError(f"unknown base {base!r}; expected one of {BASES}")
     eps1, eps2 = eta1**2, eta2**2
+    if base == "general":
+        eps1, eps2 = jnp.asarray(eps1, cdt), jnp.asarray(eps2, cdt)
     r12 = interface_amplitudes(q1, q2, eps1, eps2)
     r23 = interface_amplitudes(q2, q3, eps2, eps3)
     return Interfaces(r12, r23, q2)

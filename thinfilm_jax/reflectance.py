@@ -9,6 +9,7 @@ r"""Band-integrated reflectance R_j(θ₁) of a film (SPEC §4, K 2–4).
 from __future__ import annotations
 
 import functools
+import numbers
 
 import jax
 import jax.numpy as jnp
@@ -48,8 +49,10 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
     V.check_choice("observer", observer, ("stiles_burch_1959_10", "cie_1931_2"))
     V.check_choice("method", method, METHODS)
     V.check_choice("shat", shat, SHAT_METHODS)
-    if not (isinstance(terms, int) and terms >= 0):
+    # any integer type (np.arange(...) elements too), not bool; a plain int for the jit cache
+    if isinstance(terms, bool) or not isinstance(terms, numbers.Integral) or terms < 0:
         raise ValueError(f"terms must be a non-negative int, got {terms!r}")
+    terms = int(terms)
     V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta)])
     return _rgb_jit(film, cos_theta, observer, method, terms, shat, choose_base(film, base))
 

@@ -20,11 +20,12 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jax import Array
 
 from .film import Film
-from .fresnel import film_interfaces, safe_div
+from .fresnel import as_complex, film_interfaces, safe_div
 
 
 class SeriesTerms(NamedTuple):
@@ -38,7 +39,7 @@ class SeriesTerms(NamedTuple):
     @property
     def phi2(self) -> Array:
         """φ₂ = arg r₂₁ + arg r₂₃ (0 where z = 0, with a finite gradient)."""
-        zc = jnp.asarray(self.z) + 0j
+        zc = as_complex(self.z)
         zero = zc == 0
         return jnp.where(zero, 0.0, jnp.angle(jnp.where(zero, 1.0, zc)))
 
@@ -54,20 +55,32 @@ def series_terms(film: Film, cos_theta, *, base: str = "general") -> SeriesTerms
     r12, r23 = ifc.r12, ifc.r23
     R12 = jnp.real(r12) ** 2 + jnp.imag(r12) ** 2
     R23 = jnp.real(r23) ** 2 + jnp.imag(r23) ** 2
-    T = 1.0 - R12
-    # 1 − R₁₂R₂₃ = 0 only when both interfaces reflect totally: then R* = 0 (T = 0).
-    rstar = safe_div(T * T * R23, 1.0 - R12 * R23)
+    # T₁₂₁ and T₂₃ clamped at 0 against rounding (|r| = 1 under TIR), and the denominator
+    # written as 1 − R₁₂R₂₃ = T₁₂₁ + R₁₂T₂₃ ≥ T₁₂₁, so that R* ≤ T₁₂₁ stays bounded. Under TIR at
+    # 1|2 with an evanescent film (|r₁₂| = |r₂₃| = 1) the naive 1 − R₁₂R₂₃ is a rounding residue
+    # (possibly ~1e-33 when XLA contracts it into an FMA) and T²R₂₃/(1 − R₁₂R₂₃) blew up to O(1).
+    # TIR at 1|2 (evanescent film, Im q₂ > 0): T₁₂₁ = 0 exactly and there are no interference
+    # terms (z := 0). Without this, rounding in T (1e-7 in float32) multiplies |z|^m, and |z|
+    # exceeds 1 there (|r₂₃| > 1 for an evanescent wave on an absorbing base): O(1) errors.
+    evanescent = jnp.imag(ifc.q2) > 0
+    T = jnp.where(evanescent, 0.0, jnp.maximum(1.0 - R12, 0.0))
+    T23 = jnp.maximum(1.0 - R23, 0.0)
+    # the denominator is 0 only when both interfaces reflect totally: then R* = 0 (T = 0).
+    rstar = safe_div(T * T * R23, T + R12 * T23)
+    z = jnp.where(evanescent, jnp.zeros_like(r12), -r12 * r23)
     opd = 2.0 * film.thickness * jnp.real(ifc.q2)
-    return SeriesTerms(R12 + rstar, rstar - T, -r12 * r23, opd)
+    return SeriesTerms(R12 + rstar, rstar - T, z, opd)
 
 
 def series_reflectance(terms: SeriesTerms, wavelength, terms_m: int) -> Array:
     """Truncated series R_M(λ) per polarisation (leading axis 2), M = `terms_m`."""
-    e = jnp.exp(2j * jnp.pi * terms.opd / wavelength)
-    zm = jnp.ones_like(terms.z * e)
+    phase = 2.0 * jnp.pi * terms.opd / wavelength
+    e = jax.lax.complex(jnp.cos(phase), jnp.sin(phase))
+    ze = as_complex(terms.z) * e
+    zm = jnp.ones_like(ze)
     acc = jnp.zeros_like(terms.c0)
     for _ in range(terms_m):
-        zm = zm * terms.z * e
+        zm = zm * ze
         acc = acc + jnp.real(zm)
     return terms.c0 + 2.0 * terms.amp * acc
 
@@ -87,7 +100,7 @@ def fourier_band_reflectance(terms: SeriesTerms, shat, terms_m: int, shat0) -> A
         terms_m: M.
         shat0: Ŝ_j(0), shape (n_bands,).
     """
-    z = terms.z[..., None]
+    z = as_complex(terms.z[..., None])
     acc = 0.0
     zm = jnp.ones_like(z)
     for m in range(1, terms_m + 1):

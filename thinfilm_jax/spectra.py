@@ -25,6 +25,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
@@ -113,9 +114,11 @@ def sensitivity_ft(x, observer=DEFAULT_OBSERVER, *, sigma2=None, method: str = "
     inv_lam = jnp.asarray(1.0 / obs.wavelengths, dtype)
     w = jnp.asarray(obs.weights, dtype)
     phase = (-2.0 * jnp.pi) * x[..., None] * inv_lam
-    kern = jnp.exp(1j * phase)
+    damp = 1.0
     if sigma2 is not None:
-        kern = kern * jnp.exp((-2.0 * jnp.pi**2) * jnp.asarray(sigma2)[..., None] * inv_lam**2)
+        damp = jnp.exp((-2.0 * jnp.pi**2) * jnp.asarray(sigma2, dtype)[..., None] * inv_lam**2)
+    # e^{iφ}·damp built from real parts (no implicit real → complex promotion)
+    kern = jax.lax.complex(damp * jnp.cos(phase), damp * jnp.sin(phase))
     return kern @ w.astype(kern.dtype)
 
 
@@ -139,15 +142,17 @@ def _gaussian_ft(x, sigma2, params):
     a, nu0, s = params[..., 0], params[..., 1], params[..., 2]  # (J, G)
     xx = x[..., None, None]
     big_a = 2.0 * jnp.pi**2 * s**2
-    c = -2j * jnp.pi * nu0
+    # c = −2πiν₀ is imaginary, c² = −4π²ν₀² real: split the exponent into real parts.
     if sigma2 is None:
-        val = a * jnp.exp(c * xx - big_a * xx**2)
+        mag = a * jnp.exp(-big_a * xx**2)
+        arg = -2.0 * jnp.pi * nu0 * xx
     else:
-        s2 = jnp.asarray(sigma2)[..., None, None]
+        s2 = jnp.asarray(sigma2, params.dtype)[..., None, None]
         den = 1.0 + 2.0 * big_a * s2
-        val = a / jnp.sqrt(den) * jnp.exp((c**2 * s2 + 2.0 * c * xx - 2.0 * big_a * xx**2)
+        mag = a / jnp.sqrt(den) * jnp.exp((-4.0 * jnp.pi**2 * nu0**2 * s2 - 2.0 * big_a * xx**2)
                                           / (2.0 * den))
-    return jnp.sum(val, axis=-1)
+        arg = -2.0 * jnp.pi * nu0 * xx / den
+    return jnp.sum(jax.lax.complex(mag * jnp.cos(arg), mag * jnp.sin(arg)), axis=-1)
 
 
 @functools.cache
@@ -164,7 +169,9 @@ def gaussian_fit(observer: str = DEFAULT_OBSERVER, n_gauss: int = 3) -> np.ndarr
     obs = get_observer(observer)
     nu = 1.0 / obs.wavelengths
     xs = np.linspace(0.0, 8000.0, 801)
-    target = np.asarray(sensitivity_ft(xs, obs))  # (X, J)
+    # the tabulated Ŝ in host NumPy (float64): this function may first run while a caller is
+    # being traced by jax.jit, where JAX results are tracers that cannot become NumPy arrays
+    target = np.exp(-2j * np.pi * xs[:, None] / obs.wavelengths[None, :]) @ obs.weights  # (X, J)
     out = []
     for j in range(obs.n_bands):
         # density in ν: S(λ) |dλ/dν| = S λ²; on the samples, W_kj / t_k * λ²

@@ -30,3 +30,9 @@ def test_figure7_notebook(tmp_path):
     run_notebook("figure7.ipynb", tmp_path, {"THINFILM_NB_RESOLUTION": "8",
                                              "THINFILM_NB_OUT": str(tmp_path)})
     assert (tmp_path / "figure7.png").exists() and (tmp_path / "figure7_error.png").exists()
+
+
+@pytest.mark.slow
+def test_error_vs_runtime_notebook(tmp_path):
+    run_notebook("error_vs_runtime.ipynb", tmp_path, {"THINFILM_NB_RUN": "tiny",
+                                                      "THINFILM_NB_OUT": str(tmp_path)})

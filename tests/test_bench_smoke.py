@@ -1,0 +1,40 @@
+"""The benchmark code path on a tiny configuration (no timing assertions): it never rots."""
+
+import json
+
+import jax
+import numpy as np
+
+from thinfilm_jax import bench
+
+
+def test_bench_tiny(tmp_path, capsys):
+    result = bench.run_bench(out=tmp_path, config=bench.BenchConfig.tiny(), verbose=True)
+    data = json.loads((tmp_path / "bench.json").read_text())
+    assert (tmp_path / "error_vs_runtime.png").stat().st_size > 0
+    assert (tmp_path / "error_vs_runtime.md").exists()
+    assert data["environment"]["devices"] == [str(d) for d in jax.devices()]
+    families = {r["family"] for r in data["rows"]}
+    assert families == {"a: shading point", "b: patch", "b: real-time kernel"}
+    for r in data["rows"]:
+        assert r["warm_s_per_eval"] > 0 and r["compile_s"] >= 0, r
+        assert r["dE_max"] is not None and r["dE_max"] >= 0, r
+    # the reference itself has zero error; the M sweep agrees with rgb_reflectance
+    assert data["rows"][0]["path"] == "spectral (reference)" and data["rows"][0]["dE_max"] == 0
+    assert data["m_selection"]["tabulated"]["max_diff_vs_rgb_reflectance"] < 1e-12
+    # the per-point kernels reproduce the patch methods they stand for
+    rc = data["reference_check"]
+    assert rc["kernel_ideal_vs_patch_ideal_max_abs"] < 1e-5
+    assert rc["kernel_K29_exact_vs_patch_filtered_gt_moments_max_abs"] < 1e-5
+    # peers agree with each other on the dielectric film
+    g = data["peers"]["grids"]["tio2_glass/4x4"]
+    assert g["max_abs_diff"]["numpy_vs_airy"] < 1e-12
+    assert g["max_abs_diff"]["airy_vs_tmm"] < 1e-10
+    assert "| spectral (reference) |" in capsys.readouterr().out
+    assert result["pareto"]["a"]
+
+
+def test_pareto_front():
+    t = np.array([1.0, 2.0, 3.0, 0.5, 4.0])
+    e = np.array([5.0, 1.0, 2.0, 9.0, 0.1])
+    assert bench.pareto_front(t, e) == [3, 0, 1, 4]

@@ -103,9 +103,16 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, base: str = "auto") -
 
 @functools.partial(jax.jit, static_argnames="base")
 def _airy_jit(film, cos_theta, wavelength, base):
-    film, cos_theta, wavelength = broadcast_all(film, cos_theta, wavelength)
+    # Fresnel terms depend on (film, θ) only: form them on that shape, then broadcast to λ.
+    film, cos_theta = broadcast_all(film, cos_theta)
+    shape = jnp.broadcast_shapes(cos_theta.shape, jnp.shape(wavelength))
+    pad = (1,) * (len(shape) - cos_theta.ndim)
     ifc = film_interfaces(film, cos_theta, base=base)
-    return jnp.mean(polarised_reflectance(ifc, film.thickness, wavelength), axis=0)
+    ifc = Interfaces(*(x.reshape(*x.shape[:x.ndim - cos_theta.ndim], *pad, *cos_theta.shape)
+                       for x in ifc))
+    d = jnp.reshape(film.thickness, pad + cos_theta.shape)
+    r = jnp.mean(polarised_reflectance(ifc, d, wavelength), axis=0)
+    return jnp.broadcast_to(r, shape)
 
 
 def broadcast_all(film: Film, *args):

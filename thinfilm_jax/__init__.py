@@ -8,11 +8,14 @@ The public face is this file; modules hold one concept each:
 `fresnel` (interface amplitudes), `airy` (exact R), `series` (BB17 terms), `spectra`
 (observers, Ŝ), `reflectance` (band R_j), `lut` (Ŝ(μ,σ²) table), `opd` (D distribution),
 `filtered` (K 29), `microfacet` (GGX/Smith, patch quadrature), `patch` (SPEC §7 methods),
-`colorimetry` (XYZ/sRGB/ΔE), `figures` (Figure 7), `cli`.
+`colorimetry` (XYZ/sRGB/ΔE), `fit` (optimistix fits), `figures` (Figure 7), `bench`, `cli`.
 """
 
 from .airy import airy_reflectance as airy_reflectance
 from .film import Film as Film
+from .fit import FitResult as FitResult
+from .fit import fit_film as fit_film
+from .fit import fit_spectrum as fit_spectrum
 from .lut import ShatLUT as ShatLUT
 from .lut import build_shat_lut as build_shat_lut
 from .microfacet import albedo as albedo

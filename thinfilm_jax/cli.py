@@ -77,9 +77,11 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     b.set_defaults(func=_bench)
 
-    ft = sub.add_parser("fit", help="fit film parameters to observed patch colours",
-                        description="Fit thickness, IORs and roughness to observations read "
-                                    "from CSV or JSON; write the result as JSON.")
+    from . import fit_cli
+
+    ft = sub.add_parser("fit", help="fit film parameters to observed patch colours or spectra",
+                        description=fit_cli.__doc__,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
     ft.add_argument("observations", help="CSV or JSON file of observations")
     ft.add_argument("--out", required=False, help="result JSON path")
     ft.add_argument("--overwrite", action="store_true", help="replace an existing result")

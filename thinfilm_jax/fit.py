@@ -1,0 +1,795 @@
+r"""Gradient-based fitting of film parameters to observations (issue 5, SPEC §8).
+
+Two problems, one machinery:
+
+* `fit_film`: patch radiances L_j(θ_o, α) of SPEC §7 (shape (n_angles, n_bands)) → the
+  free subset of thickness, IORs, κ₃ and α.
+* `fit_spectrum`: reflectance spectra R(θ₁, λ) of SPEC §2 at one or more angles (classic
+  film metrology) → the free film parameters.
+
+Both minimise $\tfrac12\sum_k r_k^2$ with weighted residuals $r_k = (m_k(x) - o_k)/\sigma_k$
+(σ = 1 unless given) with optimistix (`optx.least_squares`, Levenberg–Marquardt by default).
+
+**Bounded parameters.** Every free parameter lives in a box [lo, hi] (`DEFAULT_BOUNDS`,
+overridable with `bounds=`) and is solved for in an unconstrained variable y with
+
+$$ x = lo + (hi - lo)\,\sigma(y),\qquad y = \operatorname{logit}\frac{x - lo}{hi - lo}, $$
+
+so the solver can never leave the physical domain (d ≥ 0, η ∈ [1, 4], κ ∈ [0, 10],
+α ∈ (0, 1]). Starting points are pulled at least 0.5 % of the box width inside it, where
+σ' is not vanishingly small.
+
+**Fringe order.** The loss is multimodal in thickness: neighbouring minima are one
+interference order apart (~220 nm for RGB patches of an η₂ = 1.3 film; see
+`notebooks/fitting.ipynb`), and a local solver started a few hundred nm away stops in the
+wrong one. When the thickness is free the solve is multi-start, in three stages:
+
+1. *screen*: the loss at `n_starts` thicknesses (default 64: midpoints of equal cells of the
+   thickness box, 31 nm apart over [0, 2000] nm, so every ~±100 nm basin holds several) plus
+   the initial guess, other parameters at their initial values: one model evaluation each;
+2. *short solves* from the `n_solves` (8) most promising starts (the lowest local minima of
+   the screened loss along the grid), `start_steps` (50) solver steps each, all free
+   parameters moving (a wrong η₂ guess shifts every fringe: the solves slide along the
+   d–η₂ valley); their results are ranked by the loss of the *final* model;
+3. *final solve* from the best, to convergence (`max_steps`), under the implicit adjoint.
+
+A full solve from every one of 64 starts would cost ~5 model evaluations per step and
+start; screening costs one per start. Stages 1–2 use the start model: `method` at the
+coarse `start_quadrature` (default (8, 8), ~4e-4 from converged: enough to rank fringe
+orders), and stage 3 `refine_method` (default: `method`) at `quadrature`. So
+``method="filtered", refine_method="reference"`` screens and explores with the real-time
+path (~100× cheaper) and measures with the reference.
+
+**Batching.** The starts are batched with `jax.vmap` on accelerators and with a sequential
+`jax.lax.map` on CPU (``batching="auto"``; "vmap" / "map" force one): a vmapped
+`optx.least_squares` runs every start until the slowest has finished and, on CPU, compiles
+~3× slower for no parallel gain.
+
+**Quadrature.** `patch_one`'s deterministic half-vector quadrature at n_u = n_φ = 16 (the
+fit default; 256 nodes) is within ~1e-5 of the converged reference for θ_o ≤ 80°,
+d ≤ 2 µm and every α (measured against 64 × 64; 24 gives < 1e-6, 32 < 1e-7). That is
+< 1 % of the 1e-3 noise of a 1 % measurement and biases a noise-free thickness fit by
+~0.01 nm. Raise `quadrature` for grazing views (θ_o → 90°), where convergence slows.
+
+**Uncertainties.** At the optimum, with the Jacobian J of the weighted residuals with
+respect to the *physical* free parameters (the chain rule through the box map, taken
+directly by forward-mode AD in x),
+
+$$ \operatorname{cov} = s^2 (J^T J)^{-1},\qquad s^2 = \frac{\sum_k r_k^2}{n - p} $$
+
+(`absolute_sigma=True` uses s² = 1, i.e. σ are true standard deviations). Standard errors
+are √diag(cov); the correlation matrix flags trade-offs (thickness vs film IOR for thin
+films; η₃ vs κ₃ from RGB patch colours): `FitResult.degenerate` lists the pairs
+with |corr| > 0.95. The linearised errors are meaningful only at a converged optimum in
+the right fringe order.
+
+**Gradients.** The final solve runs under optimistix's implicit adjoint, so e.g.
+``jax.grad(lambda o: fit_film(o, ...).film.thickness)`` differentiates the fitted value
+with respect to the observations (implicit function theorem at the optimum); the
+multi-start stage is under `stop_gradient`.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jax import Array
+
+from . import _validate as V
+from .airy import polarised_reflectance
+from .film import Film
+from .filtered import SHAT_SOURCES
+from .fresnel import film_interfaces
+from .lut import build_shat_lut
+from .patch import METHODS, patch_one
+from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
+
+__all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "FitResult", "SOLVERS", "fit_film", "fit_spectrum",
+           "patch_model", "spectrum_model"]
+
+FILM_PARAMS = Film._fields  # ("thickness", "eta_film", "eta_base", "kappa_base", "eta_outer")
+PARAMS = (*FILM_PARAMS, "alpha")
+
+#: Boxes of the free parameters (physical units: nm, dimensionless). α's lower end keeps the
+#: GGX lobe resolvable by the quadrature.
+DEFAULT_BOUNDS = {
+    "thickness": (0.0, 2000.0),
+    "eta_film": (1.0, 4.0),
+    "eta_base": (1.0, 4.0),
+    "kappa_base": (0.0, 10.0),
+    "eta_outer": (1.0, 4.0),
+    "alpha": (1e-3, 1.0),
+}
+
+#: Solver names → constructors taking (rtol, atol). BFGS and nonlinear CG minimise ½Σr²
+#: as a scalar function (no Jacobian structure): the first-order baselines.
+SOLVERS = {
+    "levenberg_marquardt": lambda rtol, atol: optx.LevenbergMarquardt(rtol, atol),
+    "gauss_newton": lambda rtol, atol: optx.GaussNewton(rtol, atol),
+    "dogleg": lambda rtol, atol: optx.Dogleg(rtol, atol),
+    "bfgs": lambda rtol, atol: optx.BFGS(rtol, atol),
+    "nonlinear_cg": lambda rtol, atol: optx.NonlinearCG(rtol, atol),
+}
+
+DEGENERATE_CORRELATION = 0.95
+BATCHING = ("auto", "vmap", "map")
+_START_MARGIN = 5e-3  # starting points at least this fraction of the box inside it
+
+
+class FitResult(NamedTuple):
+    """Outcome of `fit_film` / `fit_spectrum`.
+
+    Attributes:
+        film: the fitted `Film` (fixed fields as given in `initial`).
+        alpha: fitted (or given) GGX α; None for `fit_spectrum`.
+        loss: ½ Σ r² at the optimum (weighted residuals).
+        converged: True where the final solve met its tolerances
+            (``solution.result == optx.RESULTS.successful``).
+        steps: number of steps of the final solve.
+        stderr: {name: standard error} for each free parameter (physical units).
+        correlation: (p, p) correlation matrix of the free parameters, in the order `free`.
+        free: names of the free parameters.
+        residuals: model − observed (unweighted), shape of the observations.
+        start_params: (N, p) screened starting points (physical, in the order `free`; the
+            initial guess last).
+        start_loss: (N,) loss of the start model at each of them.
+        solution: the `optx.Solution` of the final solve (`.value` is unconstrained y).
+    """
+
+    film: Film
+    alpha: Array | None
+    loss: Array
+    converged: Array
+    steps: Array
+    stderr: dict
+    correlation: Array
+    free: tuple
+    residuals: Array
+    start_params: Array
+    start_loss: Array
+    solution: optx.Solution
+
+    @property
+    def params(self) -> dict:
+        """{name: fitted value} of the free parameters."""
+        return {k: (self.alpha if k == "alpha" else getattr(self.film, k)) for k in self.free}
+
+    @property
+    def degenerate(self) -> list[tuple[str, str]]:
+        """Pairs of free parameters with |correlation| > 0.95 (ill-posed combinations)."""
+        c = np.asarray(self.correlation)
+        return [(a, b) for i, a in enumerate(self.free) for j, b in enumerate(self.free)
+                if j > i and not abs(c[i, j]) <= DEGENERATE_CORRELATION]
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary: plain floats and lists, None for non-finite values."""
+
+        def f(x):
+            if x is None:
+                return None
+            v = float(np.asarray(x))
+            return v if np.isfinite(v) else None
+
+        def lst(x):
+            a = np.asarray(x, float)
+            return [lst(v) for v in a] if a.ndim > 1 else [f(v) for v in a]
+
+        return {
+            "film": {k: f(v) for k, v in self.film._asdict().items()},
+            "alpha": f(self.alpha),
+            "free": list(self.free),
+            "params": {k: f(v) for k, v in self.params.items()},
+            "stderr": {k: f(v) for k, v in self.stderr.items()},
+            "correlation": lst(self.correlation),
+            "degenerate": [list(p) for p in self.degenerate],
+            "loss": f(self.loss),
+            "rms_residual": f(np.sqrt(np.mean(np.asarray(self.residuals) ** 2))),
+            "converged": bool(self.converged),
+            "steps": int(self.steps),
+            "residuals": lst(self.residuals),
+            "n_starts_screened": int(np.shape(self.start_loss)[0]),
+        }
+
+
+# ----------------------------------------------------------------------------- forward models
+def patch_model(film: Film, theta_o, alpha, *, method: str = "reference",
+                observer: str = DEFAULT_OBSERVER, terms: int = 2, shat: str = "exact", lut=None,
+                quadrature: tuple[int, int] = (16, 16), ndf: str = "ggx",
+                base: str = "general") -> Array:
+    """L_j at each view angle: `patch_one` vmapped over `theta_o` (n_angles,) → (n_angles, J).
+
+    Scalar film fields and α; no validation (jit- and vmap-safe): the fit's forward model.
+    """
+    n_u, n_phi = quadrature
+
+    def one(t):
+        return patch_one(film, t, alpha, method=method, observer=observer, terms=terms,
+                         shat=shat, lut=lut, n_u=n_u, n_phi=n_phi, ndf=ndf, base=base)
+
+    return jax.vmap(one)(jnp.asarray(theta_o))
+
+
+def spectrum_model(film: Film, cos_theta, wavelength) -> Array:
+    """Airy R (SPEC §2) on the grid cos θ₁ (n_angles,) × λ (n_wl,) → (n_angles, n_wl).
+
+    Scalar film fields; general (complex) Fresnel path; no validation.
+    """
+    c = jnp.asarray(cos_theta)[:, None]
+    ifc = film_interfaces(film, c, base="general")
+    return jnp.mean(polarised_reflectance(ifc, film.thickness, jnp.asarray(wavelength)[None, :]),
+                    axis=0)
+
+
+# ----------------------------------------------------------------------------- parameter map
+def _to_x(y, lo, hi):
+    return lo + (hi - lo) * jax.nn.sigmoid(y)
+
+
+def _to_y(x, lo, hi):
+    u = jnp.clip((x - lo) / (hi - lo), _START_MARGIN, 1.0 - _START_MARGIN)
+    return jnp.log(u) - jnp.log1p(-u)
+
+
+class _Spec(NamedTuple):
+    """The free parameters: names and indices into PARAMS (static), boxes lo, hi (p,) (host
+    arrays, passed to the jitted solve as traced arrays: new bounds never recompile)."""
+
+    free: tuple
+    index: tuple
+    lo: object
+    hi: object
+
+    def x_free(self, y):
+        """Physical values of the free parameters from the unconstrained y (p,)."""
+        return _to_x(y, jnp.asarray(self.lo, y.dtype), jnp.asarray(self.hi, y.dtype))
+
+    def with_free(self, x_free, base_x):
+        """The six physical parameters (a tuple of scalars), free ones from `x_free`.
+
+        Built field by field (no scatter), so that derivatives with respect to the free
+        parameters never flow through the fixed ones: a jvp through the patch model then
+        skips e.g. the α-dependence of the quadrature when α is fixed.
+        """
+        out = [base_x[i] for i in range(len(PARAMS))]
+        for k, i in enumerate(self.index):
+            out[i] = x_free[k]
+        return tuple(out)
+
+    def x_full(self, y, base_x):
+        """The six physical parameters with the free ones mapped from y."""
+        return self.with_free(self.x_free(y), base_x)
+
+    def y_of(self, x_free):
+        return _to_y(x_free, jnp.asarray(self.lo, x_free.dtype), jnp.asarray(self.hi, x_free.dtype))
+
+
+def _split(x):
+    return Film(*(x[i] for i in range(5))), x[5]
+
+
+# ----------------------------------------------------------------------------- shared solve
+def _solver(name, rtol, atol):
+    return SOLVERS[name](rtol, atol)
+
+
+def _loss(fn, y, args):
+    r = fn(y, args)
+    return 0.5 * jnp.sum(r * r)
+
+
+def _batch(fn, xs, batching):
+    """fn over the leading axis of xs: `jax.vmap`, or sequential `jax.lax.map`."""
+    return jax.vmap(fn)(xs) if batching == "vmap" else jax.lax.map(fn, xs)
+
+
+def _screen(res_screen, y_starts, n_cols, n_solves, args, batching):
+    """Loss at every start (one model evaluation each, no gradient); the `n_solves` most
+    promising starts: local minima of the loss along each thickness row of the grid
+    (rows of `n_cols` thicknesses, one per screened η₂), lowest first (the initial guess,
+    last in `y_starts`, always counts as a candidate)."""
+    a = jax.lax.stop_gradient(args)
+    losses = _batch(lambda y: _loss(res_screen, y, a), y_starts, batching)
+    safe = jnp.where(jnp.isnan(losses), jnp.inf, losses)
+    grid = safe[:-1].reshape(-1, n_cols)
+    inf = jnp.full((grid.shape[0], 1), jnp.inf, grid.dtype)
+    left = jnp.concatenate([inf, grid[:, :-1]], axis=1)
+    right = jnp.concatenate([grid[:, 1:], inf], axis=1)
+    row_min = (grid <= left) & (grid <= right)
+    is_min = jnp.concatenate([row_min.reshape(-1), jnp.ones((1,), bool)])
+    # rank of each local minimum within its row: the best minimum of every row comes
+    # first, then the second best of every row, ... (a wrong η₂ row cannot crowd out the
+    # others); the initial guess ranks with the row bests
+    masked = jnp.where(row_min, grid, jnp.inf)
+    rank = jnp.argsort(jnp.argsort(masked, axis=1), axis=1).reshape(-1)
+    rank = jnp.concatenate([rank, jnp.zeros((1,), rank.dtype)])
+    order = jnp.lexsort((safe, rank, (~is_min).astype(jnp.int32)))
+    return y_starts[order[:n_solves]], losses
+
+
+def _strip(sol):
+    # the solver state holds jaxprs (not returnable from jit) and is of no use afterwards
+    return optx.Solution(value=sol.value, result=sol.result, aux=sol.aux, stats=sol.stats,
+                         state=None)
+
+
+def _pipeline(res_start, res_final, y_starts, args, cfg):
+    """Screen the starts, run short solves from the best few, solve the best to convergence.
+
+    Stages 1–2 use the cheap start model `res_start` and carry no gradient; the results of
+    the short solves are ranked by the final model `res_final`, and the best is solved to
+    convergence with it (stage 3, under optimistix's implicit adjoint).
+    """
+    solver = _solver(cfg.solver, cfg.rtol, cfg.atol)
+    a = jax.lax.stop_gradient(args)
+    if y_starts.shape[0] > 1:
+        cand, start_loss = _screen(res_start, y_starts, cfg.n_cols, cfg.n_solves, a,
+                                   cfg.batching)
+
+        def short(y0):
+            return optx.least_squares(res_start, solver, y0, a, throw=False,
+                                      max_steps=cfg.start_steps).value
+
+        ys = _batch(short, cand, cfg.batching)
+        # ranked by the final model: a cheap start model's bias cannot pick the fringe order
+        losses = _batch(lambda y: _loss(res_final, y, a), ys, cfg.batching)
+        y0 = ys[jnp.argmin(jnp.where(jnp.isnan(losses), jnp.inf, losses))]
+    else:
+        y0, start_loss = y_starts[0], _loss(res_start, y_starts[0], a)[None]
+    sol = optx.least_squares(res_final, solver, jax.lax.stop_gradient(y0), args, throw=False,
+                             max_steps=cfg.max_steps)
+    return _strip(sol), start_loss
+
+
+def _covariance(res_x, x_free, args, n_obs, absolute_sigma):
+    """(stderr (p,), correlation (p, p)) from the Jacobian in physical parameters."""
+    r = res_x(x_free, args)
+    jac = jax.jacfwd(res_x)(x_free, args)  # (n, p)
+    p = x_free.shape[0]
+    jtj = jac.T @ jac
+    scale = jnp.sqrt(jnp.diag(jtj))
+    ok = scale > 0
+    scale = jnp.where(ok, scale, 1.0)
+    a = jtj / (scale[:, None] * scale[None, :])  # unit diagonal: better conditioned
+    ainv = jnp.linalg.inv(a)
+    if absolute_sigma:
+        s2 = jnp.asarray(1.0, r.dtype)
+    else:
+        s2 = jnp.sum(r * r) / (n_obs - p) if n_obs > p else jnp.asarray(jnp.nan, r.dtype)
+    cov = s2 * ainv / (scale[:, None] * scale[None, :])
+    var = jnp.diag(cov)
+    stderr = jnp.where(ok & (var >= 0), jnp.sqrt(jnp.abs(var)), jnp.inf)
+    d = jnp.sqrt(jnp.abs(jnp.diag(ainv)))
+    corr = ainv / (d[:, None] * d[None, :])
+    return stderr, corr
+
+
+def _cells(lo, hi, n):
+    """Midpoints of n equal cells of [lo, hi]."""
+    return lo + (hi - lo) * (np.arange(n) + 0.5) / n
+
+
+def _grid_starts(spec, x0_host, n_starts, n_eta_starts, starts, dtype):
+    """Screening grid: thickness (`n_starts` cell midpoints of its box, or `starts`) × film
+    index (its initial value plus `n_eta_starts` cell midpoints of its box, if it is free),
+    other free parameters at their initial values, and the initial guess itself last.
+
+    Returns (y (N, p), x (N, p) physical, n_cols = thicknesses per row)."""
+    x_free0 = np.asarray([float(np.asarray(x0_host[i])) for i in spec.index])
+    if "thickness" not in spec.free or (n_starts <= 1 and starts is None):
+        xs = x_free0[None, :]
+        n_cols = 1
+    else:
+        k = spec.free.index("thickness")
+        lo, hi = float(spec.lo[k]), float(spec.hi[k])
+        if starts is None:
+            d = _cells(lo, hi, n_starts)
+        else:
+            d = np.sort(np.asarray(starts, float).reshape(-1))
+            if d.size == 0 or not (np.all(np.isfinite(d)) and np.all((d >= lo) & (d <= hi))):
+                raise ValueError(f"starts must be finite thicknesses within [{lo}, {hi}] nm")
+        rows = [x_free0]
+        if "eta_film" in spec.free and n_eta_starts > 0:
+            j = spec.free.index("eta_film")
+            for e in _cells(float(spec.lo[j]), float(spec.hi[j]), n_eta_starts):
+                rows.append(x_free0.copy())
+                rows[-1][j] = e
+        xs = np.concatenate([np.repeat(r[None, :], d.size, axis=0) for r in rows])
+        xs[:, k] = np.tile(d, len(rows))
+        xs = np.concatenate([xs, x_free0[None, :]])
+        n_cols = d.size
+    xs = jnp.asarray(xs, dtype)
+    return jax.vmap(spec.y_of)(xs), xs, n_cols
+
+
+# ----------------------------------------------------------------------------- validation
+def _check_free(free, allowed):
+    if isinstance(free, str):
+        free = (free,)
+    free = tuple(free)
+    if not free:
+        raise ValueError("free must name at least one parameter")
+    for k in free:
+        if k not in allowed:
+            raise ValueError(f"unknown free parameter {k!r}; expected names from {list(allowed)}")
+    if len(set(free)) != len(free):
+        raise ValueError(f"free names a parameter twice: {free}")
+    return free
+
+
+def _make_spec(free, bounds, x0):
+    b = dict(DEFAULT_BOUNDS)
+    for k, v in (bounds or {}).items():
+        if k not in b:
+            raise ValueError(f"bounds: unknown parameter {k!r}; expected names from {list(b)}")
+        lo, hi = (float(t) for t in v)
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise ValueError(f"bounds[{k!r}] must be finite with lo < hi; got {v!r}")
+        b[k] = (lo, hi)
+    index = tuple(PARAMS.index(k) for k in free)
+    for k, i in zip(free, index):
+        lo, hi = b[k]
+        if V.is_concrete(x0[i]):
+            v = float(np.asarray(x0[i]))
+            if not lo <= v <= hi:
+                raise ValueError(f"initial {k} = {v!r} lies outside its bounds [{lo}, {hi}]")
+    return _Spec(free, index, np.asarray([b[k][0] for k in free]),
+                 np.asarray([b[k][1] for k in free]))
+
+
+def _static(spec):
+    """(static part for the jit cache key, dynamic boxes): bounds never trigger a recompile."""
+    return spec._replace(lo=None, hi=None), (spec.lo, spec.hi)
+
+
+def _check_batching(batching):
+    V.check_choice("batching", batching, BATCHING)
+    if batching == "auto":
+        return "map" if jax.default_backend() == "cpu" else "vmap"
+    return batching
+
+
+def _check_scalar_film(film):
+    V.check_film(film)
+    for k, v in film._asdict().items():
+        if np.shape(v) != ():
+            raise ValueError(f"initial.{k} must be a scalar, got shape {np.shape(v)}")
+
+
+def _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol):
+    V.check_choice("solver", solver, SOLVERS)
+    if not (isinstance(n_eta_starts, int | np.integer) and not isinstance(n_eta_starts, bool)
+            and n_eta_starts >= 0):
+        raise ValueError(f"n_eta_starts must be an int >= 0, got {n_eta_starts!r}")
+    for name, v in (("n_starts", n_starts), ("n_solves", 1 if n_solves is None else n_solves),
+                    ("start_steps", start_steps), ("max_steps", max_steps)):
+        if not (isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= 1):
+            raise ValueError(f"{name} must be an int >= 1, got {v!r}")
+    for name, v in (("rtol", rtol), ("atol", atol)):
+        if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a non-negative float, got {v!r}")
+
+
+def _check_quadrature(name, q):
+    try:
+        n_u, n_phi = (int(v) for v in q)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a pair (n_u, n_phi) of ints, got {q!r}") from None
+    if n_u < 1 or n_phi < 2:
+        raise ValueError(f"{name} needs n_u >= 1 and n_phi >= 2, got {q!r}")
+    return (n_u, n_phi)
+
+
+def _weights(sigma, shape, dtype):
+    if sigma is None:
+        return jnp.ones(shape, dtype)
+    V.check_range("sigma", sigma, 0.0, lo_open=True)
+    try:
+        return 1.0 / jnp.broadcast_to(jnp.asarray(sigma, dtype), shape)
+    except ValueError:
+        raise ValueError(f"sigma of shape {np.shape(sigma)} does not broadcast to the "
+                         f"observations {shape}") from None
+
+
+def _n_candidates(y_starts, n_cols, n_solves):
+    """n_solves, by default 2 per screened row (≥ 8), at most the number of starts."""
+    if n_solves is None:
+        rows = (y_starts.shape[0] - 1) // n_cols
+        n_solves = max(8, 2 * rows + 2)
+    return min(int(n_solves), y_starts.shape[0])
+
+
+# ----------------------------------------------------------------------------- fit_film
+class _FilmCfg(NamedTuple):
+    spec: _Spec
+    method: str
+    refine_method: str | None
+    observer: str
+    terms: int
+    shat: str
+    quadrature: tuple
+    start_quadrature: tuple
+    ndf: str
+    solver: str
+    rtol: float
+    atol: float
+    n_cols: int
+    n_solves: int
+    start_steps: int
+    max_steps: int
+    absolute_sigma: bool
+    batching: str
+
+
+def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = ("thickness",),
+             method: str = "reference", refine_method: str | None = None,
+             observer: str = DEFAULT_OBSERVER, terms: int = 2, shat: str = "exact",
+             quadrature: tuple[int, int] = (16, 16),
+             start_quadrature: tuple[int, int] | None = (8, 8), ndf: str = "ggx",
+             solver: str = "levenberg_marquardt", n_starts: int = 64, n_eta_starts: int = 6,
+             n_solves: int | None = None, starts=None, start_steps: int = 50,
+             max_steps: int = 100, rtol: float = 1e-8, atol: float = 1e-10,
+             bounds: dict | None = None, sigma=None, absolute_sigma: bool = False,
+             batching: str = "auto") -> FitResult:
+    """Fit film parameters (and α) to patch radiances observed at view angles θ_o (SPEC §8).
+
+    Residuals r = (model − observed)/σ over all angles and bands; the model is
+    `patch_model` (`patch.patch_one` vmapped over θ_o) with `method`'s forward model.
+
+    Args:
+        observed: L_j, shape (n_angles, n_bands), as from
+            ``patch_radiance(film, theta_o, alpha, method=...)``.
+        theta_o: view angles (n_angles,), radians in [0, π/2].
+        alpha: GGX roughness (the initial guess if "alpha" is free), scalar in (0, 1].
+        initial: `Film` with scalar fields: fixed values and initial guesses.
+        free: names of the fitted parameters: `Film` fields and/or "alpha".
+        method: forward model, a `patch.METHODS` name (SPEC §7).
+        refine_method: if given (and different from `method`), the best solution of
+            `method` is refined with this model, e.g. ``method="filtered",
+            refine_method="reference"``: screening and multi-start with the cheap
+            real-time path, one final solve with the reference.
+        observer, terms, shat, ndf: as for `patch_radiance`.
+        quadrature: (n_u, n_φ) of the fit's half-vector quadrature (default (16, 16);
+            accuracy in the module docstring).
+        start_quadrature: quadrature of the screening of the starts (None: `quadrature`).
+        solver: a `SOLVERS` name; Levenberg–Marquardt by default.
+        n_starts: thickness guesses spread over the thickness box (midpoints of equal
+            cells), screened by their loss; 1 means the initial guess only.
+        n_eta_starts: if "eta_film" is free, the thickness grid is screened at the initial
+            η₂ and at this many η₂ values spread over its box (0: initial η₂ only).
+        n_solves: short solves from the best-screened guesses (default: 2 per screened
+            η₂ row, at least 8).
+        starts: explicit thickness guesses (nm) instead of the spread.
+        start_steps: solver steps of each short solve.
+        max_steps: solver steps of the final solve.
+        rtol, atol: solver tolerances (on the unconstrained parameters and the loss).
+        bounds: {name: (lo, hi)} overriding `DEFAULT_BOUNDS`.
+        sigma: standard deviations of the observations (broadcast to `observed`).
+        absolute_sigma: treat `sigma` as exact (s² = 1) instead of estimating s² from the
+            residuals.
+        batching: how the starts are batched: "vmap", "map" (sequential `lax.map`) or
+            "auto" (map on CPU, vmap on accelerators; see the module docstring).
+
+    Returns:
+        `FitResult`.
+
+    Example:
+        >>> import numpy as np
+        >>> from thinfilm_jax.patch import patch_radiance
+        >>> theta = np.linspace(0.0, 1.4, 9)
+        >>> obs = patch_radiance(Film(600.0, 1.3, 2.0, 0.5), theta, 0.25)
+        >>> res = fit_film(obs, theta, alpha=0.25, initial=Film(350.0, 1.3, 2.0, 0.5))
+        >>> round(float(res.film.thickness), 2), bool(res.converged)
+        (600.0, True)
+    """
+    if not isinstance(initial, Film):
+        raise TypeError(f"initial must be a thinfilm_jax.Film, got {type(initial).__name__}")
+    _check_scalar_film(initial)
+    free = _check_free(free, PARAMS)
+    V.check_choice("method", method, METHODS)
+    if refine_method is not None:
+        V.check_choice("refine_method", refine_method, METHODS)
+        if refine_method == method:
+            refine_method = None
+    V.check_choice("observer", observer, OBSERVERS)
+    V.check_choice("shat", shat, SHAT_SOURCES)
+    V.check_choice("ndf", ndf, ("ggx", "beckmann"))
+    if not (isinstance(terms, int) and terms >= 0):
+        raise ValueError(f"terms must be a non-negative int, got {terms!r}")
+    quadrature = _check_quadrature("quadrature", quadrature)
+    start_quadrature = (quadrature if start_quadrature is None
+                        else _check_quadrature("start_quadrature", start_quadrature))
+    _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol)
+    batching = _check_batching(batching)
+    theta_o = jnp.atleast_1d(jnp.asarray(theta_o))
+    if theta_o.ndim != 1:
+        raise ValueError(f"theta_o must be 1-D (n_angles,), got shape {theta_o.shape}")
+    V.check_range("theta_o", theta_o, 0.0, np.pi / 2, why=" (radians)")
+    if np.shape(alpha) != ():
+        raise ValueError(f"alpha must be a scalar, got shape {np.shape(alpha)}")
+    V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    observed = jnp.asarray(observed)
+    n_bands = get_observer(observer).n_bands
+    if observed.shape != (theta_o.shape[0], n_bands):
+        raise ValueError(f"observed must have shape (n_angles, n_bands) = "
+                         f"({theta_o.shape[0]}, {n_bands}) to match theta_o and observer "
+                         f"{observer!r}; got {observed.shape}")
+    V.check_finite("observed", observed)
+    if observed.size <= len(free):
+        raise ValueError(f"{observed.size} observations cannot determine {len(free)} free "
+                         f"parameters {free}")
+    dtype = jnp.result_type(observed, theta_o, alpha, *initial, float)
+    x0 = jnp.stack([jnp.asarray(v, dtype) for v in (*initial, alpha)])
+    spec = _make_spec(free, bounds, [*initial, alpha])
+    y_starts, x_starts, n_cols = _grid_starts(spec, [*initial, alpha], n_starts, n_eta_starts,
+                                              starts, dtype)
+    w = _weights(sigma, observed.shape, dtype)
+    lut = build_shat_lut(observer, dtype=dtype) if shat == "lut" else None
+    static, box = _static(spec)
+    cfg = _FilmCfg(static, method, refine_method, observer, terms, shat, quadrature,
+                   start_quadrature, ndf, solver, float(rtol), float(atol), n_cols,
+                   _n_candidates(y_starts, n_cols, n_solves), int(start_steps), int(max_steps),
+                   bool(absolute_sigma), batching)
+    box = tuple(jnp.asarray(b, dtype) for b in box)
+    sol, x, loss, resid, stderr, corr, start_loss = _fit_film_jit(
+        observed.astype(dtype), w, theta_o.astype(dtype), x0, y_starts, box, lut, cfg)
+    film, alpha_fit = _split(x)
+    return FitResult(film, alpha_fit, loss, sol.result == optx.RESULTS.successful,
+                     sol.stats["num_steps"], dict(zip(free, stderr)), corr, free, resid,
+                     x_starts, start_loss, sol)
+
+
+@functools.partial(jax.jit, static_argnames="cfg")
+def _fit_film_jit(observed, w, theta_o, x0, y_starts, box, lut, cfg: _FilmCfg):
+    spec = cfg.spec._replace(lo=box[0], hi=box[1])
+    final_method = cfg.refine_method or cfg.method
+
+    def model_x(x, method, quad):
+        film, alpha = _split(x)
+        return patch_model(film, theta_o, alpha, method=method, observer=cfg.observer,
+                           terms=cfg.terms, shat=cfg.shat, lut=lut, quadrature=quad,
+                           ndf=cfg.ndf, base="general")
+
+    def residuals(method, quad):
+        def fn(y, args):
+            obs, ww = args
+            return ((model_x(spec.x_full(y, x0), method, quad) - obs) * ww).reshape(-1)
+        return fn
+
+    def res_x(x_free, args):
+        obs, ww = args
+        return ((model_x(spec.with_free(x_free, x0), final_method, cfg.quadrature) - obs)
+                * ww).reshape(-1)
+
+    args = (observed, w)
+    sol, start_loss = _pipeline(residuals(cfg.method, cfg.start_quadrature),
+                                residuals(final_method, cfg.quadrature), y_starts, args, cfg)
+    x_free = spec.x_free(sol.value)
+    x = jnp.stack(spec.with_free(x_free, x0))
+    r = res_x(x_free, args)
+    resid = r.reshape(observed.shape) / w
+    stderr, corr = _covariance(res_x, jax.lax.stop_gradient(x_free), jax.lax.stop_gradient(args),
+                               observed.size, cfg.absolute_sigma)
+    return sol, x, 0.5 * jnp.sum(r * r), resid, stderr, corr, start_loss
+
+
+# ----------------------------------------------------------------------------- fit_spectrum
+class _SpecCfg(NamedTuple):
+    spec: _Spec
+    solver: str
+    rtol: float
+    atol: float
+    n_cols: int
+    n_solves: int
+    start_steps: int
+    max_steps: int
+    absolute_sigma: bool
+    batching: str
+
+
+def fit_spectrum(observed_R, wavelength, cos_theta, *, initial: Film,
+                 free: Sequence[str] = ("thickness",), solver: str = "levenberg_marquardt",
+                 n_starts: int = 256, n_eta_starts: int = 6, n_solves: int | None = None,
+                 starts=None,
+                 start_steps: int = 50,
+                 max_steps: int = 100,
+                 rtol: float = 1e-8, atol: float = 1e-10, bounds: dict | None = None,
+                 sigma=None, absolute_sigma: bool = False, batching: str = "auto") -> FitResult:
+    """Fit film parameters to reflectance spectra R(θ₁, λ) (SPEC §2; film metrology).
+
+    The model is `spectrum_model` (the exact Airy reflectance, general Fresnel path).
+
+    Args:
+        observed_R: unpolarised reflectance, shape (n_angles, n_wl) (or (n_wl,) for one angle).
+        wavelength: λ in nm, shape (n_wl,).
+        cos_theta: cos θ₁ of each spectrum, shape (n_angles,) (or scalar), in [0, 1].
+        initial: `Film` with scalar fields (fixed values and initial guesses).
+        free: `Film` field names to fit.
+        n_starts: thickness guesses screened (default 256: spectral minima are closer
+            together than patch-colour minima, and the model is cheap).
+        Other arguments as for `fit_film`.
+
+    Returns:
+        `FitResult` with ``alpha=None``; residuals of shape (n_angles, n_wl).
+
+    Example:
+        >>> import numpy as np
+        >>> from thinfilm_jax import airy_reflectance
+        >>> lam = np.linspace(400.0, 800.0, 81)
+        >>> c = np.cos(np.deg2rad([0.0, 45.0]))[:, None]
+        >>> obs = airy_reflectance(Film(812.0, 1.46, 3.9, 0.02), c, lam)
+        >>> res = fit_spectrum(obs, lam, c[:, 0], initial=Film(400.0, 1.46, 3.9, 0.02))
+        >>> round(float(res.film.thickness), 2)
+        812.0
+    """
+    if not isinstance(initial, Film):
+        raise TypeError(f"initial must be a thinfilm_jax.Film, got {type(initial).__name__}")
+    _check_scalar_film(initial)
+    free = _check_free(free, FILM_PARAMS)
+    _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol)
+    batching = _check_batching(batching)
+    wavelength = jnp.asarray(wavelength)
+    cos_theta = jnp.atleast_1d(jnp.asarray(cos_theta))
+    if wavelength.ndim != 1 or cos_theta.ndim != 1:
+        raise ValueError(f"wavelength and cos_theta must be 1-D; got shapes {wavelength.shape}, "
+                         f"{cos_theta.shape}")
+    V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
+    V.check_cos_theta(cos_theta)
+    observed_R = jnp.asarray(observed_R)
+    if observed_R.ndim == 1:
+        observed_R = observed_R[None, :]
+    shape = (cos_theta.shape[0], wavelength.shape[0])
+    if observed_R.shape != shape:
+        raise ValueError(f"observed_R must have shape (n_angles, n_wl) = {shape} to match "
+                         f"cos_theta and wavelength; got {observed_R.shape}")
+    V.check_finite("observed_R", observed_R)
+    if observed_R.size <= len(free):
+        raise ValueError(f"{observed_R.size} observations cannot determine {len(free)} free "
+                         f"parameters {free}")
+    dtype = jnp.result_type(observed_R, wavelength, cos_theta, *initial, float)
+    x0 = jnp.stack([jnp.asarray(v, dtype) for v in (*initial, 1.0)])
+    spec = _make_spec(free, bounds, [*initial, 1.0])
+    y_starts, x_starts, n_cols = _grid_starts(spec, [*initial, 1.0], n_starts, n_eta_starts,
+                                              starts, dtype)
+    w = _weights(sigma, shape, dtype)
+    static, box = _static(spec)
+    cfg = _SpecCfg(static, solver, float(rtol), float(atol), n_cols,
+                   _n_candidates(y_starts, n_cols, n_solves),
+                   int(start_steps), int(max_steps), bool(absolute_sigma), batching)
+    box = tuple(jnp.asarray(b, dtype) for b in box)
+    sol, x, loss, resid, stderr, corr, start_loss = _fit_spectrum_jit(
+        observed_R.astype(dtype), w, wavelength.astype(dtype), cos_theta.astype(dtype), x0,
+        y_starts, box, cfg)
+    film, _ = _split(x)
+    return FitResult(film, None, loss, sol.result == optx.RESULTS.successful,
+                     sol.stats["num_steps"], dict(zip(free, stderr)), corr, free, resid,
+                     x_starts, start_loss, sol)
+
+
+@functools.partial(jax.jit, static_argnames="cfg")
+def _fit_spectrum_jit(observed, w, wavelength, cos_theta, x0, y_starts, box, cfg: _SpecCfg):
+    spec = cfg.spec._replace(lo=box[0], hi=box[1])
+
+    def res(y, args):
+        obs, ww = args
+        return ((spectrum_model(_split(spec.x_full(y, x0))[0], cos_theta, wavelength) - obs)
+                * ww).reshape(-1)
+
+    def res_x(x_free, args):
+        obs, ww = args
+        film = _split(spec.with_free(x_free, x0))[0]
+        return ((spectrum_model(film, cos_theta, wavelength) - obs) * ww).reshape(-1)
+
+    args = (observed, w)
+    sol, start_loss = _pipeline(res, res, y_starts, args, cfg)
+    x_free = spec.x_free(sol.value)
+    x = jnp.stack(spec.with_free(x_free, x0))
+    r = res_x(x_free, args)
+    stderr, corr = _covariance(res_x, jax.lax.stop_gradient(x_free), jax.lax.stop_gradient(args),
+                               observed.size, cfg.absolute_sigma)
+    return sol, x, 0.5 * jnp.sum(r * r), r.reshape(observed.shape) / w, stderr, corr, start_loss

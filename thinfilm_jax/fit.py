@@ -546,7 +546,9 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
             ``patch_radiance(film, theta_o, alpha, method=...)``.
         theta_o: view angles (n_angles,), radians in [0, π/2].
         alpha: GGX roughness (the initial guess if "alpha" is free), scalar in (0, 1].
-        initial: `Film` with scalar fields: fixed values and initial guesses.
+        initial: `Film` with scalar fields: fixed values and initial guesses (concrete:
+            they seed the start grid on the host; `observed` may be traced, so the fit
+            works under `jax.jit`, `jax.vmap` and `jax.grad` with respect to it).
         free: names of the fitted parameters: `Film` fields and/or "alpha".
         method: forward model, a `patch.METHODS` name (SPEC §7).
         refine_method: if given (and different from `method`), the best solution of

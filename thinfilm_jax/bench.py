@@ -344,7 +344,7 @@ def fourier_partial_sums(film: Film, cos_theta, observer: str, m_max: int,
     """
     st = series_terms(film, cos_theta, base=base)
     dtype = jnp.result_type(cos_theta, float)
-    s0 = shat_at_zero(observer, dtype) if shat == "tabulated" else jnp.ones(3, dtype)
+    s0 = shat_at_zero(observer, dtype, shat)
     z = as_complex(st.z[..., None])
     zm = jnp.ones_like(z)
     acc = st.c0[..., None] * s0

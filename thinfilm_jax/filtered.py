@@ -37,5 +37,5 @@ def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, term
 
         def shat_m(m):
             return sensitivity_ft(-m * mean, observer, sigma2=(m * std) ** 2, method=method)
-    s0 = shat_at_zero(observer, dtype) if shat != "gaussian" else jnp.ones(3, dtype)
+    s0 = shat_at_zero(observer, dtype, "gaussian" if shat == "gaussian" else "tabulated")
     return jnp.mean(fourier_band_reflectance(st, shat_m, terms, s0), axis=0)

@@ -81,7 +81,7 @@ def fourier_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, terms=2,
     """BB17 Fourier-domain band reflectance (K 4), M = `terms` (broadcast inputs)."""
     st = series_terms(film, cos_theta, base=base)
     dtype = jnp.result_type(cos_theta, float)
-    s0 = shat_at_zero(observer, dtype) if shat == "tabulated" else jnp.ones(3, dtype)
+    s0 = shat_at_zero(observer, dtype, shat)
     per_pol = fourier_band_reflectance(
         st, lambda m: sensitivity_ft(-m * st.opd, observer, method=shat), terms, s0)
     return jnp.mean(per_pol, axis=0)

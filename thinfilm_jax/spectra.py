@@ -122,9 +122,17 @@ def sensitivity_ft(x, observer=DEFAULT_OBSERVER, *, sigma2=None, method: str = "
     return kern @ w.astype(kern.dtype)
 
 
-def shat_at_zero(observer=DEFAULT_OBSERVER, dtype=jnp.float64) -> Array:
-    """Ŝ_j(0) = Σ_k W_kj (= 1 up to rounding), as used by the Fourier path."""
-    return jnp.asarray(_observer(observer).weights.sum(axis=0), dtype)
+def shat_at_zero(observer=DEFAULT_OBSERVER, dtype=jnp.float64, method: str = "tabulated") -> Array:
+    """Ŝ_j(0) of the C₀ term, shape (n_bands,).
+
+    "tabulated": Σ_k W_kj (= 1 up to rounding), which keeps SPEC §4's identity exact on the
+    shared samples. "gaussian": exactly 1, the unit area of each band (the fit's own Ŝ(0) is
+    only approximately 1; C₀ must not inherit that fitting error).
+    """
+    obs = _observer(observer)
+    if method == "gaussian":
+        return jnp.ones(obs.n_bands, dtype)
+    return jnp.asarray(obs.weights.sum(axis=0), dtype)
 
 
 # ----------------------------------------------------------------------------------------

@@ -1,0 +1,293 @@
+"""Image-based lighting (SPEC §9): maps, the exact paths, the real-time paths, their limits."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from thinfilm_jax import (EnvMap, Film, PrefilteredEnvMap, SHIPPED_ENVMAPS, albedo,
+                          envmap_radiance, load_envmap, patch_radiance, prefilter_envmap,
+                          rgb_reflectance)
+from thinfilm_jax.envmap import downsample, save_envmap, texel_centers, texel_solid_angles
+from thinfilm_jax.microfacet import brdf_no_fresnel
+
+FILM = Film(600.0, 1.3, 2.0, 0.5)
+Z = np.array([0.0, 0.0, 1.0])
+
+
+def view_at(theta, phi=0.0):
+    theta = np.asarray(theta, float)
+    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
+                     np.cos(theta)], -1)
+
+
+@pytest.fixture(scope="module")
+def forest():
+    """The shipped forest map box-filtered to 32 × 64 (smooth, coloured light)."""
+    return downsample(load_envmap("forest_slope"), 4)
+
+
+# ----------------------------------------------------------------------------- maps
+def test_shipped_maps_load():
+    for name in SHIPPED_ENVMAPS:
+        env = load_envmap(name)
+        assert env.radiance.shape == (128, 256, 3)
+        assert np.all(np.isfinite(env.radiance)) and np.all(np.asarray(env.radiance) >= 0)
+    sun = np.asarray(load_envmap("drakensberg").radiance)
+    assert sun.max() > 1e3 * np.median(sun)  # the sun survives the box filter
+
+
+def test_exr_and_hdr_round_trip(tmp_path):
+    rng = np.random.default_rng(0)
+    a = rng.uniform(0, 50, (8, 16, 3))
+    save_envmap(tmp_path / "m.exr", a)
+    np.testing.assert_allclose(load_envmap(tmp_path / "m.exr").radiance, a, rtol=1e-6)
+    save_envmap(tmp_path / "m.hdr", a)  # RGBE: 8-bit mantissas under a shared exponent
+    err = np.abs(np.asarray(load_envmap(tmp_path / "m.hdr").radiance) - a)
+    assert np.all(err <= a.max(axis=-1, keepdims=True) / 128)
+
+
+@pytest.mark.parametrize("bad, match", [
+    (np.ones((8, 8, 3)), "width must be 2 × height"),
+    (np.ones((8, 16)), r"\(H, W, 3\)"),
+    (np.full((8, 16, 3), np.nan), "non-finite"),
+    (-np.ones((8, 16, 3)), "negative"),
+])
+def test_bad_arrays_rejected(bad, match):
+    with pytest.raises(ValueError, match=match):
+        load_envmap(bad)
+
+
+def test_bad_files_rejected(tmp_path):
+    with pytest.raises(ValueError, match="nope.hdr.*no such file"):
+        load_envmap(tmp_path / "nope.hdr")
+    junk = tmp_path / "junk.hdr"
+    junk.write_bytes(b"this is not an image")
+    with pytest.raises(ValueError, match="junk.hdr.*unreadable"):
+        load_envmap(junk)
+
+
+def test_downsample_preserves_integral(forest):
+    full = np.asarray(load_envmap("forest_slope").radiance)
+    small = np.asarray(forest.radiance)
+    i_full = np.einsum("hwc,hw->c", full, texel_solid_angles(*full.shape[:2]))
+    i_small = np.einsum("hwc,hw->c", small, texel_solid_angles(*small.shape[:2]))
+    np.testing.assert_allclose(i_small, i_full, rtol=1e-12)
+
+
+def test_texel_geometry():
+    om = texel_solid_angles(16, 32)
+    assert abs(om.sum() - 4 * np.pi) < 1e-12
+    d = texel_centers(16, 32)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1, atol=1e-15)
+    assert d[0, 0, 2] > 0.99 and d[-1, 0, 2] < -0.99  # row 0 is the top (z-up)
+    assert d[8, 0, 0] > 0 and d[8, 8, 1] > 0  # φ from +x toward +y
+
+
+# ----------------------------------------------------------------------------- exact paths
+@pytest.fixture(scope="module")
+def constant():
+    """L ≡ (1, 1, 1) at 64 × 128 and its prefiltered maps."""
+    env = load_envmap(np.ones((64, 128, 3)))
+    return env, prefilter_envmap(env)
+
+
+@pytest.mark.parametrize("alpha", [0.1, 0.25, 0.6])
+def test_constant_environment_reproduces_patch(alpha, constant):
+    """L ≡ (1, 1, 1) is the uniform light of SPEC §7: every method equals patch_radiance,
+    the real-time ones to the prefilter's accuracy (A table, 17 levels, 64 × 128)."""
+    theta = np.array([0.0, 0.6, 1.1, 1.4])
+    v = view_at(theta, phi=0.3)
+    for method, env, tol in (("reference", constant[0], 2e-4), ("ideal", constant[1], 1.5e-3),
+                             ("filtered", constant[1], 1e-3)):
+        got = np.asarray(envmap_radiance(FILM, alpha, Z, v, env, method=method))
+        want = np.asarray(patch_radiance(FILM, theta, alpha, method=method))
+        assert np.abs(got - want).max() < tol, (method, np.abs(got - want).max())
+
+
+def test_reference_converged_by_refinement(forest):
+    """SPEC §9: band error ≤ 1e-3 of the band's largest value; doubling s and n_cos moves
+    the result by far less."""
+    n = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, -0.8, 0.6]])
+    v = np.array([[0.5, 0.0, np.sqrt(0.75)], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    for alpha in (0.08, 0.3):
+        s = None
+        base = np.asarray(envmap_radiance(FILM, alpha, n, v, forest, subdivisions=s))
+        finer = np.asarray(envmap_radiance(FILM, alpha, n, v, forest, n_cos=2048,
+                                           subdivisions=2 * _auto(forest, alpha)))
+        scale = np.abs(finer).max(axis=0)
+        assert np.all(np.abs(base - finer).max(axis=0) <= 1e-3 * scale), (alpha, base, finer)
+
+
+def _auto(env, alpha):
+    from thinfilm_jax.ibl import auto_subdivisions
+
+    return auto_subdivisions(env.shape[0], alpha)
+
+
+def test_rotation_about_z_by_whole_columns(forest):
+    h, w = forest.shape
+    k = 11
+    rot = 2 * np.pi * k / w
+    rz = np.array([[np.cos(rot), -np.sin(rot), 0], [np.sin(rot), np.cos(rot), 0], [0, 0, 1]])
+    n = np.array([0.3, -0.4, np.sqrt(0.75)])
+    v = np.array([0.0, 0.6, 0.8])
+    rolled = EnvMap(jnp.roll(forest.radiance, k, axis=1))
+    a = envmap_radiance(FILM, 0.2, n, v, forest)
+    b = envmap_radiance(FILM, 0.2, rz @ n, rz @ v, rolled)
+    np.testing.assert_allclose(b, a, rtol=1e-10)
+
+
+def test_single_bright_texel_is_brdf_times_solid_angle():
+    h, w = 128, 256
+    i, j = 40, 30
+    img = np.zeros((h, w, 3))
+    img[i, j] = 1.0
+    env = load_envmap(img)
+    wi = texel_centers(h, w)[i, j]
+    om = texel_solid_angles(h, w)[i, j]
+    v = view_at(0.7)
+    alpha = 0.5
+    got = np.asarray(envmap_radiance(FILM, alpha, Z, v, env, subdivisions=2))
+    hv = (wi + v) / np.linalg.norm(wi + v)
+    want = (np.asarray(brdf_no_fresnel(wi, v, alpha)) * wi[2] * om
+            * np.asarray(rgb_reflectance(FILM, float(hv @ wi))))
+    np.testing.assert_allclose(got, want, rtol=2e-3)
+
+
+def test_white_furnace():
+    """A near-perfect mirror base (η₂ = η₁ removes the film, κ₃ = 1e4: R = 1 − 4e-8)
+    under L ≡ 1 reflects exactly the prefiltered BRDF A(θ_o, α) ≤ 1 in every band."""
+    mirror = Film(300.0, 1.0, 1.0, 1e4)
+    const = load_envmap(np.ones((32, 64, 3)))
+    theta = np.array([0.2, 0.9, 1.3])
+    for alpha in (0.15, 0.5, 1.0):
+        got = np.asarray(envmap_radiance(mirror, alpha, Z, view_at(theta), const))
+        a = np.asarray(albedo(theta, alpha))
+        np.testing.assert_allclose(got, np.repeat(a[:, None], 3, 1), atol=2e-4)
+        assert np.all(got <= 1)
+
+
+def test_below_horizon_is_black(forest):
+    v = np.array([[0.6, 0.0, -0.8], [1.0, 0.0, 0.0]])
+    for method in ("reference", "filtered"):
+        assert np.all(np.asarray(envmap_radiance(FILM, 0.3, Z, v, forest, method=method)) == 0)
+
+
+def test_mc_converges_to_reference(forest):
+    """16 independent MC estimates: their mean is within 4 standard errors of the reference,
+    and the spread is that of an unbiased 1/√N estimator (no systematic offset)."""
+    n = np.array([0.0, 0.3, np.sqrt(0.91)])
+    v = view_at(np.array([0.3, 1.0]), phi=2.0)
+    ref = np.asarray(envmap_radiance(FILM, 0.3, n, v, forest))
+    est = np.stack([np.asarray(envmap_radiance(FILM, 0.3, n, v, forest, method="mc",
+                                               n_samples=4096, key=jax.random.key(k)))
+                    for k in range(16)])
+    se = est.std(axis=0, ddof=1) / 4
+    assert np.all(np.abs(est.mean(axis=0) - ref) <= 4 * se + 1e-12)
+    assert np.all(se < 0.02 * np.abs(ref).max())
+
+
+# ----------------------------------------------------------------------------- real time
+def test_prefiltered_constant_map_is_exact_and_moments_match_the_lobe():
+    const = prefilter_envmap(np.ones((32, 64, 3)))
+    np.testing.assert_allclose(const.radiance, 1.0, atol=1e-12)
+    np.testing.assert_allclose(const.albedo[0, 0], 1.0, atol=1e-6)  # A(0, α → 0) = 1
+    mean = np.asarray(const.moments[..., :3])
+    r = texel_centers(32, 64)
+    np.testing.assert_allclose(mean[0], r, atol=1e-12)  # level √α = 0: the mirror
+    # |μ| shrinks with roughness, monotonically
+    norms = np.linalg.norm(mean[:, 16, 0], axis=-1)
+    assert np.all(np.diff(norms) < 0) and norms[-1] > 0.5
+
+
+def test_prefiltered_map_reused_and_validated(forest):
+    pref = prefilter_envmap(forest)
+    assert isinstance(pref, PrefilteredEnvMap)
+    v = view_at(np.array([0.2, 0.9]))
+    a = envmap_radiance(FILM, 0.3, Z, v, pref, method="filtered")
+    b = envmap_radiance(FILM, 0.3, Z, v, forest, method="filtered")
+    np.testing.assert_allclose(a, b, rtol=1e-12)
+    with pytest.raises(ValueError, match="pass an EnvMap"):
+        envmap_radiance(FILM, 0.3, Z, v, pref, method="reference")
+
+
+def test_realtime_methods_track_the_reference(forest):
+    """Under a real map the split sum itself errs at grazing views (a grey mirror shows it);
+    K 29 adds little to that error, while the ideal-direction film adds much more on a
+    rough surface (K §4.2)."""
+    pref = prefilter_envmap(forest)
+    theta = np.linspace(0.1, 1.3, 7)
+    v = view_at(theta)
+
+    def rel_err(film, method):
+        ref = np.asarray(envmap_radiance(film, 0.5, Z, v, forest))
+        got = np.asarray(envmap_radiance(film, 0.5, Z, v, pref, method=method))
+        return np.abs(got - ref).mean(axis=1) / ref.mean(axis=1)
+
+    split_sum = rel_err(Film(0.0, 1.0, 1.0, 1e4), "ideal")  # R ≈ 1: the split sum alone
+    filtered, ideal = rel_err(FILM, "filtered"), rel_err(FILM, "ideal")
+    assert np.all(filtered <= split_sum + 0.05), (filtered, split_sum)
+    assert np.any(ideal > split_sum + 0.1), (ideal, split_sum)
+    assert filtered[:3].mean() < 0.5 * ideal[:3].mean()
+
+
+def test_diagonal_equals_cross_band_under_white_light():
+    const = prefilter_envmap(np.ones((16, 32, 3)))
+    v = view_at(np.array([0.3, 1.2]))
+    for method in ("ideal", "filtered"):
+        a = envmap_radiance(FILM, 0.3, Z, v, const, method=method)
+        b = envmap_radiance(FILM, 0.3, Z, v, const, method=method, cross_band=False)
+        np.testing.assert_allclose(a, b, atol=2e-3 if method == "filtered" else 1e-12)
+
+
+def test_per_channel_moments_option(forest):
+    lum = prefilter_envmap(forest)
+    per = prefilter_envmap(forest, moments="per_channel")
+    assert per.moments.shape == lum.moments.shape[:-1] + (3, 9)
+    v = view_at(np.array([0.4, 1.1]))
+    a = np.asarray(envmap_radiance(FILM, 0.4, Z, v, lum, method="filtered"))
+    b = np.asarray(envmap_radiance(FILM, 0.4, Z, v, per, method="filtered"))
+    assert np.all(np.isfinite(b)) and np.abs(a - b).max() < 0.05 * np.abs(a).max()
+
+
+def test_float32_realtime_close_to_float64(forest):
+    pref64 = prefilter_envmap(forest)
+    pref32 = jax.tree.map(lambda x: x.astype(jnp.complex64 if jnp.iscomplexobj(x)
+                                             else jnp.float32), pref64)
+    v = view_at(np.array([0.0, 0.5, 1.2, 1.5]))
+    for method in ("ideal", "filtered"):
+        a = envmap_radiance(FILM, 0.3, Z, v, pref64, method=method)
+        b = envmap_radiance(FILM.astype(jnp.float32), jnp.float32(0.3), Z.astype(np.float32),
+                            v.astype(np.float32), pref32, method=method)
+        assert b.dtype == jnp.float32
+        np.testing.assert_allclose(b, a, atol=2e-5)
+
+
+# ----------------------------------------------------------------------------- gradients
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+@pytest.mark.parametrize("method", ["reference", "filtered"])
+def test_gradients_finite(method, dtype):
+    env = load_envmap(downsample(load_envmap("venice_sunset"), 8).radiance)
+    pref = prefilter_envmap(env) if method == "filtered" else env
+    if dtype == jnp.float32:
+        pref = jax.tree.map(lambda x: x.astype(jnp.complex64 if jnp.iscomplexobj(x)
+                                               else jnp.float32), pref)
+    v = view_at(np.array([0.0, 0.8, 1.45]), phi=1.0).astype(dtype)
+    z = Z.astype(dtype)
+
+    def loss(d, eta, a):
+        f = Film(d, eta, dtype(2.0), dtype(0.5))
+        return jnp.sum(envmap_radiance(f, a, z, v, pref, method=method, subdivisions=1))
+
+    args = (dtype(500.0), dtype(1.4), dtype(0.3))
+    g = jax.grad(loss, argnums=(0, 1, 2))(*args)
+    assert all(np.isfinite(x) for x in g)
+    if dtype == jnp.float64 and method == "reference":
+        for k, h in ((0, 1e-3), (1, 1e-6), (2, 1e-6)):
+            up = list(args)
+            dn = list(args)
+            up[k] += h
+            dn[k] -= h
+            fd = (loss(*up) - loss(*dn)) / (2 * h)
+            np.testing.assert_allclose(g[k], fd, rtol=1e-5, atol=1e-9)

@@ -1,0 +1,91 @@
+r"""Per-shading-point real-time kernels: what a renderer port copies (K 4, K 20–29).
+
+Every real-time integrator of the library (`patch_radiance`, `envmap_radiance`) and the
+benchmarks call these functions; none re-derives them. They are pure, broadcast over
+leading axes, trace-safe (no validation: the public integrators validate), and clean in
+float32 (every contraction states its precision).
+
+* `ideal_kernel` — BB17 real time, the film at the ideal reflection direction (h = n):
+  R_j(cos θ_o) by the truncated Fourier sum (K 4). Multiply by A(θ_o, α) (and, under an
+  environment, by the prefiltered radiance) for the `ideal` method.
+* `filtered_kernel` — Kneiphof et al. 2019 (K 29) from the mean μ_ω and covariance Σ_ω of
+  the light direction: μ_c = ⟨ω_o, μ_ω⟩, σ_c² = ω_oᵀ Σ_ω ω_o (K 20–21); μ_D, σ_D by the
+  Taylor chain (K 25–28); C*_m, φ₂* at cos θ₁* = √((1 + μ_c)/2) (K 22); Ŝ(μ, σ²) from the
+  LUT, the exact quadrature or the Gaussian fit.
+* `lobe_moments` — exact A(θ_o, α), μ_ω, Σ_ω of p_R ∝ ρ̃ ⟨n, ω_i⟩ (K 12, uniform light) in
+  the frame n = z, ω_o = (sin θ_o, 0, cos θ_o), from the half-vector quadrature.
+
+Valid inputs: cos θ_o ∈ [0, 1]; ω_o and μ_ω in one frame (ω_o unit, |μ_ω| ≤ 1), Σ_ω
+symmetric positive semi-definite; film fields as `Film` (thickness ≥ 0 nm, η ≥ 1, κ ≥ 0).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from .film import Film
+from .filtered import filtered_bands
+from .lut import ShatLUT
+from .microfacet import light_moments, patch_quadrature
+from .opd import cos_incidence_from_projection, project_light_moments, taylor_opd_moments
+from .reflectance import fourier_bands
+from .spectra import DEFAULT_OBSERVER
+
+__all__ = ["ideal_kernel", "filtered_kernel", "lobe_moments"]
+
+
+def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2,
+                 shat: str = "tabulated", base: str = "general") -> Array:
+    """R_j(cos θ_o) by K 4 with M = `terms`, shape broadcast(film, cos_o) + (J,).
+
+    Args:
+        film: `Film`.
+        cos_o: cos θ_o ∈ [0, 1] (the ideal reflection: cos θ₁ = cos θ_o).
+        observer: observer name or `spectra.Observer` (e.g. the cross-band observer of IBL).
+        terms: M ≥ 0 Fourier orders.
+        shat: "tabulated" (exact Ŝ on the observer's samples) or "gaussian" (BB17 fit).
+        base: "general" (complex η₃ + iκ₃) or "dielectric" (κ₃ = 0 only).
+    """
+    return fourier_bands(film, cos_o, observer, terms=terms, shat=shat, base=base)
+
+
+def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, terms: int = 2,
+                    shat: str = "lut", lut: ShatLUT | None = None,
+                    base: str = "general") -> Array:
+    """K 29 band reflectance from light-direction moments, shape (..., J).
+
+    Args:
+        film: `Film` (fields broadcast with the leading axes of `wo`).
+        wo: view direction ω_o (..., 3), unit, in the frame of `mean` and `cov`.
+        mean: μ_ω (..., 3), mean light direction of p_R (|μ_ω| ≤ 1).
+        cov: Σ_ω (..., 3, 3), covariance of the light direction.
+        shat: "lut" (needs `lut`), "exact" (SPEC §5 quadrature) or "gaussian" (closed form).
+    """
+    mu_c, var_c = project_light_moments(wo, mean, cov)
+    opd = taylor_opd_moments(film, mu_c, var_c)
+    cos_star = cos_incidence_from_projection(mu_c)
+    return filtered_bands(film, cos_star, opd, observer, terms=terms, shat=shat, lut=lut,
+                          base=base)
+
+
+@functools.partial(jax.jit, static_argnames=("order", "ndf"))
+def lobe_moments(theta_o, alpha, *, order: int = 48, ndf: str = "ggx"):
+    """(A, μ_ω, Σ_ω) of p_R for broadcast θ_o, α: shapes (...), (..., 3), (..., 3, 3).
+
+    Frame n = z, ω_o = (sin θ_o, 0, cos θ_o); quadrature order `order` per axis (K 12, 20, 21).
+    """
+    dt = jnp.result_type(theta_o, alpha, float)
+    theta_o, alpha = jnp.broadcast_arrays(jnp.asarray(theta_o, dt), jnp.asarray(alpha, dt))
+    shape = theta_o.shape
+
+    def one(t, a):
+        q = patch_quadrature(t, a, n_u=order, n_phi=order, kind=ndf)
+        m, c = light_moments(q)
+        return jnp.sum(q.weight), m, c
+
+    a, m, c = jax.vmap(one)(theta_o.reshape(-1), alpha.reshape(-1))
+    return a.reshape(shape), m.reshape(*shape, 3), c.reshape(*shape, 3, 3)

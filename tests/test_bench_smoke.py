@@ -5,7 +5,7 @@ import json
 import jax
 import numpy as np
 
-from thinfilm_jax import bench
+from thinfilm_jax.studies import bench, pareto
 
 
 def test_bench_tiny(tmp_path, capsys):
@@ -30,11 +30,27 @@ def test_bench_tiny(tmp_path, capsys):
     g = data["peers"]["grids"]["tio2_glass/4x4"]
     assert g["max_abs_diff"]["numpy_vs_airy"] < 1e-12
     assert g["max_abs_diff"]["airy_vs_tmm"] < 1e-10
-    assert "| spectral (reference) |" in capsys.readouterr().out
+    # the specialisation table: every row timed and scored; exact specialisations add ~0
+    spec = json.loads((tmp_path / "specialisation.json").read_text())
+    assert (tmp_path / "specialisation.md").exists()
+    rows = {(r["baseline"], r["specialised"], r["films"]): r for r in spec["rows"]}
+    assert len(rows) == len(spec["rows"]) >= 10
+    for r in spec["rows"]:
+        assert r["baseline_us"] > 0 and r["specialised_us"] > 0, r
+        assert r["dE_added_max"] is not None and r["dE_added_max"] >= 0, r
+    assert rows["ideal M=2, general", "ideal M=2, dielectric", "dielectric"][
+        "band_abs_added_max"] < 1e-5
+    assert rows["ideal M=2", "ideal M=2, band G only", "absorbing"]["band_abs_added_max"] < 1e-6
+    # Fresnel only is the exact d = 0 value: closer to the reference than M = 2
+    d0 = rows["ideal M=2", "Fresnel only", "bare"]
+    assert d0["specialised_dE_vs_reference_max"] < 0.01
+    assert d0["specialised_dE_vs_reference_max"] <= d0["baseline_dE_vs_reference_max"]
+    out = capsys.readouterr().out
+    assert "| spectral (reference) |" in out and "| no film (d = 0) |" in out
     assert result["pareto"]["a"]
 
 
 def test_pareto_front():
     t = np.array([1.0, 2.0, 3.0, 0.5, 4.0])
     e = np.array([5.0, 1.0, 2.0, 9.0, 0.1])
-    assert bench.pareto_front(t, e) == [3, 0, 1, 4]
+    assert pareto.pareto_front(t, e) == [3, 0, 1, 4]

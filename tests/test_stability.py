@@ -1,14 +1,14 @@
 """Stiff and extreme inputs for every public function, value and gradient, float32 and float64.
 
 Each (function, dtype) pair is ONE vectorised, jitted call over a product grid of extreme
-inputs (`thinfilm_jax.bench.STIFF_*`: d ∈ {0, 1e-6, 500, 1e4, 1e5} nm; η₂ = η₁, η₁ + 1e-12,
+inputs (`thinfilm_jax.studies.stiff.STIFF_*`: d ∈ {0, 1e-6, 500, 1e4, 1e5} nm; η₂ = η₁, η₁ + 1e-12,
 4; κ₃ ∈ {0, 1e-12, 50}; θ ∈ {0, 1e-9, 0.7, 1.2, π/2 − 1e-9, π/2}; α ∈ {1e-4, 0.3, 1};
 η₁ > η₂ with total internal reflection; σ_D up to 1e9 nm), with the gradient (a VJP with an
 all-ones cotangent, i.e. jax.grad of the sum, reverse mode as users call it) w.r.t. every
 `Film` field and every other input (the six `patch_radiance` variants share one reverse pass:
-compile time dominates this file). The checks live in `thinfilm_jax.bench` so that the
-markdown report (`thinfilm-jax bench` → figures/stability_report.md, or
-`python benchmarks/stability_report.py`) shows exactly what is asserted here:
+compile time dominates this file). The checks live in `thinfilm_jax.studies.stability` so
+that the markdown report (`thinfilm-jax bench` → figures/stability_report.md, or
+`python -m thinfilm_jax.studies.stability`) shows exactly what is asserted here:
 
 * every value and every gradient is finite;
 * the value lies within its exact range (R ∈ [0, 1], bands within [Σ W⁻, Σ W⁺] — the
@@ -24,15 +24,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from thinfilm_jax import Film, bench, rgb_reflectance
+from thinfilm_jax import Film, rgb_reflectance
+from thinfilm_jax.studies import stability
 
 DTYPES = ("float64", "float32")
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
-@pytest.mark.parametrize("name", bench.STABILITY_FUNCTIONS)
+@pytest.mark.parametrize("name", stability.STABILITY_FUNCTIONS)
 def test_stiff_inputs(name, dtype):
-    r = bench.stability_check(name, dtype)
+    r = stability.stability_check(name, dtype)
     assert r.n_cases > 0
     assert r.nonfinite_value == 0, r.examples
     assert sum(r.nonfinite_grad.values()) == 0, (r.nonfinite_grad, r.examples)
@@ -60,8 +61,8 @@ def test_series_under_tir_is_the_documented_limitation():
 
 def test_report_renders(tmp_path):
     """The markdown report builds from results (one cheap check, both dtypes)."""
-    res = [bench.stability_check("opd.taylor_opd_moments", dt) for dt in DTYPES]
-    text = bench.stability_markdown(res)
+    res = [stability.stability_check("opd.taylor_opd_moments", dt) for dt in DTYPES]
+    text = stability.stability_markdown(res)
     assert "opd.taylor_opd_moments" in text and "float32" in text
     assert text.count("\n| opd.taylor_opd_moments |") >= 2
 

@@ -8,7 +8,9 @@ The public face is this file; modules hold one concept each:
 `fresnel` (interface amplitudes), `airy` (exact R), `series` (BB17 terms), `spectra`
 (observers, Ŝ), `reflectance` (band R_j), `lut` (Ŝ(μ,σ²) table), `opd` (D distribution),
 `filtered` (K 29), `microfacet` (GGX/Smith, patch quadrature), `patch` (SPEC §7 methods),
-`colorimetry` (XYZ/sRGB/ΔE), `fit` (optimistix fits), `figures` (Figure 7), `bench`, `cli`.
+`colorimetry` (XYZ/sRGB/ΔE), `fit` (optimistix fits), `cli`. Studies and benchmarks
+(Figure 7, error vs run time, peers, specialisations, stability) live outside the core in
+`thinfilm_jax.studies`, which nothing here imports.
 """
 
 from .airy import airy_reflectance as airy_reflectance

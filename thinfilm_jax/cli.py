@@ -16,7 +16,7 @@ def _enable_x64():
 
 def _figure7(args) -> int:
     _enable_x64()
-    from .figures import Figure7Config, run_figure7
+    from .studies.figure7 import Figure7Config, run_figure7
 
     fields = {f.name for f in dataclasses.fields(Figure7Config)}
     cfg = Figure7Config(**{k: v for k, v in vars(args).items() if k in fields and v is not None})
@@ -31,7 +31,7 @@ def _figure7(args) -> int:
 
 def _bench(args) -> int:
     _enable_x64()
-    from .bench import run_bench
+    from .studies.bench import run_bench
 
     run_bench(out=args.out, quick=args.quick)
     return 0

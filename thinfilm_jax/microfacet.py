@@ -294,18 +294,18 @@ def patch_quadrature(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx") -> PatchQu
     bmax = jnp.where(pos, jnp.arctan2(num, alpha * co), jnp.arctan2(co, alpha * den))
     gmax = jnp.where(pos, jnp.arctan2(alpha * co, num), jnp.arctan2(alpha * den, co))
     s, t, g = _inner_rule(n_u, kind)
-    beta = bmax * k(s)
-    gamma = gmax + bmax * k(t)
+    beta = bmax * k(s)[None, :]  # (n_phi, 1) × (1, n_u): ranks aligned explicitly
+    gamma = gmax + bmax * k(t)[None, :]
     sb, cb = jnp.sin(beta), jnp.sin(gamma)
     ch, sh, th = _half_vector_trig(sb, cb, alpha)
     c = so * sh * cp + co * ch  # ⟨o, h⟩
     ci = jnp.maximum(2 * c * ch - co, 0)  # ⟨n, ω_i⟩
-    w_beta = bmax * k(g) * _beta_pdf(sb, cb, kind)
+    w_beta = bmax * k(g)[None, :] * _beta_pdf(sb, cb, kind)
     weight = w_beta * wphi * _g2_over_cos_o(ci, co, alpha, kind) * (so * th * cp + co)
     weight = jnp.maximum(weight, 0)
     h = jnp.stack([sh * cp, sh * sp, ch], axis=-1)
     o = jnp.stack([so, jnp.zeros_like(so), co])
-    wi = 2 * c[..., None] * h - o
+    wi = 2 * c[..., None] * h - o[None, None, :]
     return PatchQuadrature(c.reshape(-1), weight.reshape(-1), wi.reshape(-1, 3))
 
 

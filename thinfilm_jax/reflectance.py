@@ -77,11 +77,16 @@ def spectral_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, base="ge
 
 
 def fourier_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, terms=2,
-                  shat="tabulated", base="general"):
-    """BB17 Fourier-domain band reflectance (K 4), M = `terms` (broadcast inputs)."""
+                  shat="tabulated", base="general", partial_sums: bool = False):
+    """BB17 Fourier-domain band reflectance (K 4), M = `terms` (broadcast inputs).
+
+    With ``partial_sums=True``, every M' = 0 … `terms` at once, stacked on a leading axis
+    (`series.fourier_band_reflectance`).
+    """
     st = series_terms(film, cos_theta, base=base)
     dtype = jnp.result_type(cos_theta, float)
     s0 = shat_at_zero(observer, dtype, shat)
     per_pol = fourier_band_reflectance(
-        st, lambda m: sensitivity_ft(-m * st.opd, observer, method=shat), terms, s0)
-    return jnp.mean(per_pol, axis=0)
+        st, lambda m: sensitivity_ft(-m * st.opd, observer, method=shat), terms, s0,
+        partial_sums=partial_sums)
+    return jnp.mean(per_pol, axis=1 if partial_sums else 0)

@@ -85,7 +85,8 @@ def series_reflectance(terms: SeriesTerms, wavelength, terms_m: int) -> Array:
     return terms.c0 + 2.0 * terms.amp * acc
 
 
-def fourier_band_reflectance(terms: SeriesTerms, shat, terms_m: int, shat0) -> Array:
+def fourier_band_reflectance(terms: SeriesTerms, shat, terms_m: int, shat0, *,
+                             partial_sums: bool = False) -> Array:
     r"""Band reflectance (K 4 / K 29) per polarisation, leading axis 2, trailing axis bands.
 
     $$ R_j = C_0\hat S_j(0) + \sum_{m=1}^{M} C_m\left[e^{im\varphi_2}\hat S_j(-mD)
@@ -99,11 +100,19 @@ def fourier_band_reflectance(terms: SeriesTerms, shat, terms_m: int, shat0) -> A
         shat: callable m ↦ Ŝ_j(−m μ_D[, m²σ_D²]) with shape (*batch, n_bands), complex.
         terms_m: M.
         shat0: Ŝ_j(0), shape (n_bands,).
+        partial_sums: return every partial sum M' = 0 … M stacked on a new leading axis
+            (one evaluation of the whole M sweep; the last entry is the M-term value).
     """
     z = as_complex(terms.z[..., None])
-    acc = 0.0
+    # ranks aligned explicitly: (2, *batch, 1) against (*batch, J) and (J,)
+    c0 = terms.c0[..., None] * jnp.reshape(shat0, (1,) * terms.c0.ndim + (-1,))
+    amp = 2.0 * terms.amp[..., None]
+    acc = jnp.zeros_like(c0)
+    sums = [c0]
     zm = jnp.ones_like(z)
     for m in range(1, terms_m + 1):
         zm = zm * z
-        acc = acc + jnp.real(zm * shat(m))
-    return terms.c0[..., None] * shat0 + 2.0 * terms.amp[..., None] * acc
+        acc = acc + jnp.real(zm * shat(m)[None])
+        if partial_sums:
+            sums.append(c0 + amp * acc)
+    return jnp.stack(sums) if partial_sums else c0 + amp * acc

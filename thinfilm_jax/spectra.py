@@ -111,15 +111,42 @@ def sensitivity_ft(x, observer=DEFAULT_OBSERVER, *, sigma2=None, method: str = "
     dtype = jnp.result_type(x, float)
     if method == "gaussian":
         return _gaussian_ft(x, sigma2, jnp.asarray(gaussian_fit(obs.name), dtype))
-    inv_lam = jnp.asarray(1.0 / obs.wavelengths, dtype)
-    w = jnp.asarray(obs.weights, dtype)
-    phase = (-2.0 * jnp.pi) * x[..., None] * inv_lam
-    damp = 1.0
+    # built from real parts (no implicit real → complex promotion)
+    return jax.lax.complex(*_shat_quadrature(jnp, x, sigma2, obs, dtype))
+
+
+def shat_host(x, sigma2=None, observer=DEFAULT_OBSERVER) -> np.ndarray:
+    """`sensitivity_ft(x, observer, sigma2=sigma2)` (tabulated) in host NumPy float64.
+
+    For tables built once on the host (`lut`, `gaussian_fit`) and for references: it also runs
+    while a caller is being traced by `jax.jit` (JAX results would be tracers there) and
+    whatever `jax_enable_x64` says.
+    """
+    re, im = _shat_quadrature(np, np.asarray(x, np.float64), sigma2, _observer(observer),
+                              np.float64)
+    return re + 1j * im
+
+
+def _shat_quadrature(xp, x, sigma2, obs: Observer, dtype):
+    r"""Real and imaginary parts of Σ_k W_kj e^{−2πix/λ_k} e^{−2π²σ²/λ_k²}, x.shape + (J,).
+
+    The one implementation of the Ŝ quadrature (SPEC §4–5): `sensitivity_ft` calls it with
+    xp = jax.numpy (traceable, any dtype), `shat_host` with xp = numpy (float64). Shapes are
+    aligned explicitly (no implicit rank promotion).
+    """
     if sigma2 is not None:
-        damp = jnp.exp((-2.0 * jnp.pi**2) * jnp.asarray(sigma2, dtype)[..., None] * inv_lam**2)
-    # e^{iφ}·damp built from real parts (no implicit real → complex promotion)
-    kern = jax.lax.complex(damp * jnp.cos(phase), damp * jnp.sin(phase))
-    return kern @ w.astype(kern.dtype)
+        x, sigma2 = xp.broadcast_arrays(x, xp.asarray(sigma2, dtype))
+    inv_lam = xp.asarray(1.0 / obs.wavelengths, dtype).reshape((1,) * x.ndim + (-1,))
+    phase = (-2.0 * np.pi) * x[..., None] * inv_lam
+    re, im = xp.cos(phase), xp.sin(phase)
+    if sigma2 is not None:
+        damp = xp.exp((-2.0 * np.pi**2) * sigma2[..., None] * inv_lam**2)
+        re, im = damp * re, damp * im
+    w = xp.asarray(obs.weights, dtype)
+    if xp is np:
+        return re @ w, im @ w
+    hi = jax.lax.Precision.HIGHEST
+    return jnp.matmul(re, w, precision=hi), jnp.matmul(im, w, precision=hi)
 
 
 def shat_at_zero(observer=DEFAULT_OBSERVER, dtype=jnp.float64, method: str = "tabulated") -> Array:
@@ -147,7 +174,10 @@ def _gaussian_ft(x, sigma2, params):
     x ~ N(μ, σ²), E[exp(−A x² + c x)] = (1 + 2Aσ²)^{-1/2} exp((c²σ² + 2cμ − 2Aμ²)/(2(1+2Aσ²)))
     with A = 2π²s², c = −2πiν₀.
     """
-    a, nu0, s = params[..., 0], params[..., 1], params[..., 2]  # (J, G)
+    if sigma2 is not None:
+        x, sigma2 = jnp.broadcast_arrays(x, jnp.asarray(sigma2, params.dtype))
+    params = params.reshape((1,) * x.ndim + params.shape)  # ranks aligned explicitly
+    a, nu0, s = params[..., 0], params[..., 1], params[..., 2]  # (..., J, G)
     xx = x[..., None, None]
     big_a = 2.0 * jnp.pi**2 * s**2
     # c = −2πiν₀ is imaginary, c² = −4π²ν₀² real: split the exponent into real parts.
@@ -155,7 +185,7 @@ def _gaussian_ft(x, sigma2, params):
         mag = a * jnp.exp(-big_a * xx**2)
         arg = -2.0 * jnp.pi * nu0 * xx
     else:
-        s2 = jnp.asarray(sigma2, params.dtype)[..., None, None]
+        s2 = sigma2[..., None, None]
         den = 1.0 + 2.0 * big_a * s2
         mag = a / jnp.sqrt(den) * jnp.exp((-4.0 * jnp.pi**2 * nu0**2 * s2 - 2.0 * big_a * xx**2)
                                           / (2.0 * den))
@@ -177,9 +207,8 @@ def gaussian_fit(observer: str = DEFAULT_OBSERVER, n_gauss: int = 3) -> np.ndarr
     obs = get_observer(observer)
     nu = 1.0 / obs.wavelengths
     xs = np.linspace(0.0, 8000.0, 801)
-    # the tabulated Ŝ in host NumPy (float64): this function may first run while a caller is
-    # being traced by jax.jit, where JAX results are tracers that cannot become NumPy arrays
-    target = np.exp(-2j * np.pi * xs[:, None] / obs.wavelengths[None, :]) @ obs.weights  # (X, J)
+    # the tabulated Ŝ on the host: this function may first run while a caller is being traced
+    target = shat_host(xs, observer=obs)  # (X, J)
     out = []
     for j in range(obs.n_bands):
         # density in ν: S(λ) |dλ/dν| = S λ²; on the samples, W_kj / t_k * λ²

@@ -1,6 +1,6 @@
 """Seeded recovery study of `fit_film` / `fit_spectrum` on random films with 1 % noise.
 
-    python benchmarks/fit_study.py [--n 50] [--seed 0] [--out figures/fit_study.json]
+    python -m thinfilm_jax.studies.fit_study [--n 50] [--seed 0] [--out figures/fit_study.json]
 
 For each of `--n` random films (thickness U(100, 1500) nm, η₂ U(1.2, 1.8), η₃ U(1.5, 3.0),
 κ₃ U(0, 1), α U(0.05, 0.5)):
@@ -31,16 +31,14 @@ import sys
 import time
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 
-jax.config.update("jax_enable_x64", True)
-
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-
-from thinfilm_jax import Film, airy_reflectance  # noqa: E402
-from thinfilm_jax._io import write_json  # noqa: E402
-from thinfilm_jax.fit import fit_film, fit_spectrum, patch_model, spectrum_model  # noqa: E402
-from thinfilm_jax.patch import patch_radiance  # noqa: E402
+from .._io import write_json
+from ..airy import airy_reflectance
+from ..film import Film
+from ..fit import fit_film, fit_spectrum, patch_model, spectrum_model
+from ..patch import patch_radiance
 
 THETA_O = np.deg2rad(np.linspace(0.0, 80.0, 9))
 LAMBDA = np.arange(400.0, 800.1, 5.0)
@@ -166,7 +164,7 @@ def run(n, seed, out, models=tuple(MODELS), spectra=True):
     if spectra:
         summary["spectrum(airy)"] = summarise(spec_rows, spec_first)
     result = {
-        "command": "python benchmarks/fit_study.py " + " ".join(sys.argv[1:]),
+        "command": "python -m thinfilm_jax.studies.fit_study " + " ".join(sys.argv[1:]),
         "seed": seed, "n": n, "noise": "Gaussian, sd = 1 % of the RMS of each film's data",
         "free": list(FREE), "tolerance": TOL,
         "patch": {"theta_o_deg": np.rad2deg(THETA_O).tolist(),
@@ -207,6 +205,7 @@ def main(argv=None):
                     help=f"comma list of {list(MODELS)}")
     ap.add_argument("--no-spectra", action="store_true", help="skip the spectral fits")
     args = ap.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)
     models = tuple(m for m in args.models.split(",") if m)
     for m in models:
         if m not in MODELS:

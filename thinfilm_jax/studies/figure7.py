@@ -23,10 +23,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._io import atomic_write, write_json
-from .colorimetry import bands_to_srgb, delta_e2000
-from .film import Film
-from .patch import patch_radiance
+from .._io import atomic_write, write_json
+from ..colorimetry import bands_to_srgb, delta_e2000
+from ..film import Film
+from ..patch import patch_radiance
 
 METHOD_ORDER = ("ideal", "filtered_gt_moments", "filtered_gt_opd", "reference")
 METHOD_TITLES = {

@@ -1,0 +1,107 @@
+"""The error-vs-run-time table, its Pareto front and figure (`error_vs_runtime.md/.png`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._io import atomic_write
+from ._timing import fmt
+
+ERROR_FLOOR = 1e-6  # ΔE below this (the references: 0) is drawn on the floor of the log plot
+
+
+def markdown_table(rows) -> str:
+    """The error-vs-time table as markdown (times in µs per evaluation)."""
+    head = ("| family | path | dtype | ΔE₀₀ mean | ΔE₀₀ p95 | ΔE₀₀ max | max abs band err "
+            "| warm µs / eval | evals / s | compile s | error vs | worst case |")
+    lines = [head, "|" + "---|" * 12]
+    for r in rows:
+        us = r.get("warm_s_per_eval")
+        lines.append(
+            f"| {r['family']} | {r['path']} | {r['dtype']} | {fmt(r['dE_mean'])} "
+            f"| {fmt(r['dE_p95'])} | {fmt(r['dE_max'])} | {fmt(r['band_abs_max'])} "
+            f"| {fmt(None if us is None else us * 1e6)} | {fmt(r.get('evals_per_s'), '.3g')} "
+            f"| {fmt(r.get('compile_s'), '.2f')} | {r['error_vs']} "
+            f"| {r.get('worst_case', '')} |")
+    return "\n".join(lines)
+
+
+def pareto_front(times, errors):
+    """Indices of the non-dominated points (smaller time and smaller error), by time."""
+    order = np.argsort(times, kind="stable")
+    front, best = [], math.inf
+    for i in order:
+        if errors[i] < best:
+            front.append(int(i))
+            best = errors[i]
+    return front
+
+
+def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = "") -> None:
+    """Error (ΔE₀₀, log) against warm time per evaluation (s, log), one panel per family,
+    Pareto front as a step line. Points carry their row number, listed beside each panel;
+    errors below `ERROR_FLOOR` (the references, exact specialisations) are drawn on the floor
+    as open markers."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [("a", "(a) per shading point: band reflectance R_j(cos θ)",
+               "warm run time per shading point (s)"),
+              ("b", "(b) per patch under uniform light: L_j(θ_o, α)",
+               "warm run time per patch; per shading point for the kernels (▲) (s)")]
+    fig, axes = plt.subplots(1, 2, figsize=(19, 7.5), constrained_layout=True)
+    cmap = plt.get_cmap("tab10")
+    for ax, (fam, ptitle, xlabel) in zip(axes, panels):
+        sel = [(i, r) for i, r in enumerate(rows) if r["family"].startswith(fam)
+               and "warm_s_per_eval" in r and np.isfinite(r[metric])]
+        groups = sorted({r["group"] for _, r in sel})
+        legend = []
+        for gi, g in enumerate(groups):
+            pts = [(i, r) for i, r in sel if r["group"] == g]
+            t = np.array([r["warm_s_per_eval"] for _, r in pts])
+            e = np.array([r[metric] for _, r in pts])
+            low = e < ERROR_FLOOR
+            marker = "^" if g == "real-time kernel" else "o"
+            ax.scatter(t[~low], e[~low], color=cmap(gi % 10), label=g, s=34, zorder=3,
+                       marker=marker)
+            ax.scatter(t[low], np.full(low.sum(), ERROR_FLOOR), facecolors="none",
+                       edgecolors=cmap(gi % 10), s=34, zorder=3, marker=marker,
+                       label=None if (~low).any() else g)
+            for (i, r), x, y in zip(pts, t, np.maximum(e, ERROR_FLOOR)):
+                ax.annotate(str(i), (x, y), fontsize=7, xytext=(3, 2),
+                            textcoords="offset points")
+                legend.append(f"{i:2d} {r['path']} ({r['dtype']})")
+        front = [r for _, r in sel if r.get("comparable", True)]
+        if front:
+            t = np.array([r["warm_s_per_eval"] for r in front])
+            e = np.array([max(r[metric], ERROR_FLOOR) for r in front])
+            f = pareto_front(t, e)
+            ax.step(t[f], e[f], where="post", color="k", lw=1.2, alpha=0.7, zorder=2,
+                    label="Pareto front (full-grid rows)")
+        ax.axhline(1.0, color="grey", ls=":", lw=1)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(f"CIEDE2000 ΔE vs float64 reference, {metric.split('_')[1]} over the "
+                      f"grid (open: < {ERROR_FLOOR:g})")
+        ax.set_title(ptitle, fontsize=11)
+        ax.grid(True, which="both", alpha=0.25)
+        ax.legend(fontsize=7, loc="lower left")
+        ax.text(1.01, 1.0, "\n".join(sorted(legend, key=lambda x: int(x.split()[0]))),
+                transform=ax.transAxes, fontsize=6.3, va="top", ha="left", family="monospace")
+    fig.suptitle(title, fontsize=10)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    plt.close(fig)
+
+
+def pareto_rows(rows, fam):
+    """Row indices of family `fam` on the Pareto front of ΔE p95 against warm time."""
+    idx = [i for i, r in enumerate(rows) if r["family"].startswith(fam)
+           and "warm_s_per_eval" in r and np.isfinite(r["dE_p95"]) and r["comparable"]]
+    t = np.array([rows[i]["warm_s_per_eval"] for i in idx])
+    e = np.array([max(rows[i]["dE_p95"], ERROR_FLOOR) for i in idx])
+    return [idx[j] for j in pareto_front(t, e)] if idx else []

@@ -238,7 +238,7 @@ def _patch_call(**over):
     (dict(refine_method="nope"), ValueError, r"unknown refine_method"),
     (dict(solver="adam"), ValueError, r"unknown solver"),
     (dict(initial=(600.0, 1.3, 2.0)), TypeError, r"initial must be a thinfilm_jax.Film"),
-    (dict(initial=Film(-1.0, 1.3, 2.0)), ValueError, r"film.thickness must lie in"),
+    (dict(initial=Film(-1.0, 1.3, 2.0)), ValueError, r"initial.thickness must lie in"),
     (dict(initial=Film(2500.0, 1.3, 2.0)), ValueError, r"initial thickness = 2500.0 lies "
                                                        r"outside its bounds"),
     (dict(bounds={"thickness": (10.0, 5.0)}), ValueError, r"lo < hi"),

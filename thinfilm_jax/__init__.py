@@ -2,7 +2,7 @@
 
 Exact spectral reference (Airy), Belcour & Barla 2017 Fourier-domain band integration,
 Kneiphof et al. 2019 filtered reflectance for rough surfaces, and a uniform-lighting patch
-integrator. Conventions (SPEC.md): nm, radians, GGX α, colour bands of unit area.
+integrator. Conventions (docs/SPEC.md): nm, radians, GGX α, colour bands of unit area.
 
 The public face is this file; modules hold one concept each:
 `fresnel` (interface amplitudes), `airy` (exact R), `series` (BB17 terms), `spectra`
@@ -13,6 +13,7 @@ The public face is this file; modules hold one concept each:
 `thinfilm_jax.studies`, which nothing here imports.
 """
 
+from ._validate import checked as checked
 from .airy import airy_reflectance as airy_reflectance
 from .film import Film as Film
 from .fit import FitResult as FitResult

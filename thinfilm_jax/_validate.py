@@ -1,17 +1,89 @@
 """Checks at the public boundary: bad input raises a clear error naming the argument.
 
-Checks run on concrete values only. Inside `jax.jit` (traced values) they are skipped:
-validate before entering a jitted function, or call the public functions un-jitted once.
+What is checked where (README "Input checking"):
+
+* **Concrete values** (NumPy arrays, Python numbers and lists, JAX arrays outside a trace):
+  every public function checks ranges, finiteness, shapes, option names, sizes and orders
+  before it runs and raises `ValueError` / `TypeError` naming the argument and its allowed
+  range. Plain Python lists and tuples are accepted as arrays. Values within a few ulps
+  outside a closed range ([0, 1] for cos θ, [0, π/2] for θ_o) are rounding, not errors:
+    cos θ is clamped into [0, 1], θ_o is accepted as is (`ROUNDING_ULPS`).
+* **Traced values** (inside `jax.jit`, `jax.vmap`, `jax.grad`): values are unknown while
+  tracing, so by default nothing is checked (dtype checks still run: complex where a real
+  is needed raises). Opt in with `thinfilm_jax.checked`: inside a function wrapped by
+  ``checked(fn)`` (or traced inside a ``with checked():`` block) the same range checks
+  become `equinox.error_if` checks that raise at run time, e.g.
+  ``jax.jit(tf.checked(lambda f: tf.airy_reflectance(f, c, lam)))``. They cost a reduction
+  and a branch per checked argument.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import functools
+import numbers
 from collections.abc import Iterable
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .film import Film
+
+#: Values at most this many ulps (of the bound's magnitude, at least of 1) outside a closed
+#: range are taken as rounding: cos θ = cos(π/2) in float32 is −4.4e-8 (0.4 ulp of 1).
+ROUNDING_ULPS = 4
+
+_CHECKED = contextvars.ContextVar("thinfilm_jax_checked", default=False)
+
+
+class checked(contextlib.ContextDecorator):
+    """Opt-in run-time checks of traced inputs (`equinox.error_if`).
+
+    As a function wrapper, the recommended form, which works under `jax.jit` caching:
+
+        >>> import jax, thinfilm_jax as tf
+        >>> f = jax.jit(tf.checked(lambda film: tf.airy_reflectance(film, 0.6, 550.0)))
+        >>> f(tf.Film(600.0, 1.3, 2.0, -0.5))  # doctest: +SKIP
+        Traceback (most recent call last):
+        ...
+        jax.errors.JaxRuntimeError: ... film.kappa_base must lie in [0.0, inf] ...
+
+    (the error is raised when the result is computed; its message names the argument).
+
+    As a context, ``with tf.checked(): ...`` checks what is *traced* inside the block: a
+    jitted function traced (first called) outside the block stays unchecked when called
+    inside it (JAX reuses the compiled trace). Concrete inputs are always checked.
+    """
+
+    def __enter__(self):
+        self._token = _CHECKED.set(True)
+        return self
+
+    def __exit__(self, *exc):
+        _CHECKED.reset(self._token)
+        return False
+
+    def __new__(cls, fn=None):
+        self = super().__new__(cls)
+        if fn is None:
+            return self
+        if not callable(fn):
+            raise TypeError(f"checked() takes a function (or no argument), got "
+                            f"{type(fn).__name__}")
+
+        @functools.wraps(fn)
+        def wrapper(*args, **kwargs):
+            with cls():
+                return fn(*args, **kwargs)
+
+        return wrapper
+
+
+def checking() -> bool:
+    """True while traced inputs are checked (inside `checked`)."""
+    return _CHECKED.get()
 
 
 def is_concrete(x) -> bool:
@@ -22,30 +94,102 @@ def _values(x):
     return np.asarray(x)
 
 
-def check_finite(name: str, x) -> None:
+def _error_if(x, bad, msg):
+    import equinox as eqx
+
+    return eqx.error_if(x, bad, msg)
+
+
+def as_array(name: str, x):
+    """`x` unchanged if it is a number or an array; lists/tuples become arrays.
+
+    Anything else (a string, None, a dict, a ragged list) raises a TypeError naming `name`.
+    """
+    if isinstance(x, (list, tuple)):
+        try:
+            a = np.asarray(x)
+        except ValueError:
+            raise TypeError(f"{name} must be a number or a rectangular array of numbers; got "
+                            f"a ragged {type(x).__name__}") from None
+        if a.dtype == object or not (np.issubdtype(a.dtype, np.number)
+                                     or np.issubdtype(a.dtype, np.bool_)):
+            raise TypeError(f"{name} must be a number or an array of numbers; got "
+                            f"{type(x).__name__} {str(x)[:60]}")
+        return jnp.asarray(a, jnp.result_type(float) if np.issubdtype(a.dtype, np.floating)
+                           or np.issubdtype(a.dtype, np.integer) else None)
+    if isinstance(x, (numbers.Number, np.ndarray, np.generic, jax.Array)) or not is_concrete(x):
+        if isinstance(x, (np.ndarray, np.generic)) and not (np.issubdtype(x.dtype, np.number)
+                                                              or x.dtype == np.bool_):
+            raise TypeError(f"{name} must be numeric; got an array of dtype {x.dtype}")
+        return x
+    raise TypeError(f"{name} must be a number or an array of numbers; got "
+                    f"{type(x).__name__} {str(x)[:60]!r}")
+
+
+def check_real(name: str, x):
+    if jnp.iscomplexobj(x):
+        raise TypeError(f"{name} must be real; got complex values (only Film.eta_base may be "
+                        f"complex, read as eta_base + 1j*kappa_base)")
+    return x
+
+
+def check_finite(name: str, x):
+    """`x`, after checking it holds no NaN/inf (concrete; traced only inside `checked`)."""
+    x = check_real(name, as_array(name, x))
     if is_concrete(x):
         v = _values(x)
         if not np.all(np.isfinite(v)):
             raise ValueError(f"{name} must be finite; got NaN or inf in {name}")
+    elif checking():
+        x = _error_if(x, ~jnp.all(jnp.isfinite(x)), f"{name} must be finite; got NaN or inf")
+    return x
 
 
-def check_range(name: str, x, lo=None, hi=None, *, lo_open=False, hi_open=False, why="") -> None:
-    """Raise ValueError if any concrete value of `x` lies outside [lo, hi] (or open ends)."""
+def _slack(x, bound, ulps):
+    if not ulps or bound is None:
+        return 0.0
+    dt = x.dtype if hasattr(x, "dtype") and jnp.issubdtype(x.dtype, jnp.floating) \
+        else np.dtype(float)
+    return ulps * float(np.finfo(dt).eps) * max(1.0, abs(float(bound)))
+
+
+def check_range(name: str, x, lo=None, hi=None, *, lo_open=False, hi_open=False, why="",
+                ulps: int = 0, clamp: bool = False):
+    """`x`, after checking that every value lies in [lo, hi] (or open ends).
+
+    Values at most `ulps` ulps outside a closed end are rounding: accepted, and clamped onto
+    the end if `clamp`. Lists become arrays. Concrete values raise a ValueError naming `name`
+    and the range; traced values are checked only inside `checked` (equinox.error_if).
+    """
+    x = check_real(name, as_array(name, x))
+    lb = "(" if lo_open else "["
+    hb = ")" if hi_open else "]"
+    rng = f"{lb}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{hb}"
     if not is_concrete(x):
-        return
+        if checking():
+            lo_s, hi_s = _slack(x, lo, ulps), _slack(x, hi, ulps)
+            ok = jnp.isfinite(x)
+            if lo is not None:
+                ok &= (x > lo) if lo_open else (x >= lo - lo_s)
+            if hi is not None:
+                ok &= (x < hi) if hi_open else (x <= hi + hi_s)
+            x = _error_if(x, ~jnp.all(ok), f"{name} must lie in {rng}{why}")
+        return x
     check_finite(name, x)
     v = _values(x)
+    lo_s = 0.0 if lo_open else _slack(v, lo, ulps)
+    hi_s = 0.0 if hi_open else _slack(v, hi, ulps)
     bad = np.zeros(v.shape, bool)
     if lo is not None:
-        bad |= (v <= lo) if lo_open else (v < lo)
+        bad |= (v <= lo) if lo_open else (v < lo - lo_s)
     if hi is not None:
-        bad |= (v >= hi) if hi_open else (v > hi)
+        bad |= (v >= hi) if hi_open else (v > hi + hi_s)
     if np.any(bad):
-        lb = "(" if lo_open else "["
-        hb = ")" if hi_open else "]"
-        rng = f"{lb}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{hb}"
         first = v[bad].flat[0]
         raise ValueError(f"{name} must lie in {rng}{why}; got {first!r}")
+    if clamp and ((lo is not None and np.any(v < lo)) or (hi is not None and np.any(v > hi))):
+        x = jnp.clip(jnp.asarray(x), lo, hi)
+    return x
 
 
 def check_broadcast(names_values: Iterable[tuple[str, object]]) -> tuple[int, ...]:
@@ -58,22 +202,43 @@ def check_broadcast(names_values: Iterable[tuple[str, object]]) -> tuple[int, ..
         raise ValueError(f"arguments have incompatible shapes: {desc}") from None
 
 
-def check_film(film) -> None:
-    """Validate a `Film` (SPEC §1 domain)."""
+def check_film(film, name: str = "film") -> Film:
+    """Validate a `Film` (SPEC §1 domain) and return it normalised: list fields as arrays
+    and a complex `eta_base` η + iκ folded into (eta_base = η, kappa_base = kappa_base + κ)
+    (`Film.real_base`). Callers must use the returned film."""
     if not isinstance(film, Film):
-        raise TypeError(f"film must be a thinfilm_jax.Film, got {type(film).__name__}")
-    check_range("film.thickness", film.thickness, 0.0, why=" (nm, d >= 0)")
-    check_range("film.eta_film", film.eta_film, 1.0, why=" (supported domain eta >= 1)")
-    check_range("film.eta_outer", film.eta_outer, 1.0, why=" (supported domain eta >= 1)")
-    check_range("film.eta_base", film.eta_base, 0.0, lo_open=True)
-    check_range("film.kappa_base", film.kappa_base, 0.0, why=" (absorption kappa >= 0)")
-    check_broadcast((f"film.{k}", v) for k, v in film._asdict().items())
+        raise TypeError(f"{name} must be a thinfilm_jax.Film, got {type(film).__name__}")
+    film = Film(*(as_array(f"{name}.{k}", v) for k, v in film._asdict().items())).real_base()
+    film = Film(
+        check_range(f"{name}.thickness", film.thickness, 0.0, why=" (nm, d >= 0)"),
+        check_range(f"{name}.eta_film", film.eta_film, 1.0, why=" (supported domain eta >= 1)"),
+        check_range(f"{name}.eta_base", film.eta_base, 0.0, lo_open=True),
+        check_range(f"{name}.kappa_base", film.kappa_base, 0.0,
+                    why=" (absorption kappa >= 0; a complex eta_base n + ik needs k >= 0)"),
+        check_range(f"{name}.eta_outer", film.eta_outer, 1.0,
+                    why=" (supported domain eta >= 1)"),
+    )
+    check_broadcast((f"{name}.{k}", v) for k, v in film._asdict().items())
+    return film
 
 
-def check_cos_theta(cos_theta, name: str = "cos_theta") -> None:
-    check_range(name, cos_theta, 0.0, 1.0)
+def check_cos_theta(cos_theta, name: str = "cos_theta"):
+    """cos θ in [0, 1]; rounding-level excursions (≤ `ROUNDING_ULPS` ulps) are clamped."""
+    return check_range(name, cos_theta, 0.0, 1.0, ulps=ROUNDING_ULPS, clamp=True)
+
+
+def check_angle(name: str, theta):
+    """An angle in [0, π/2] radians; float32 π/2 (a rounding above π/2) is accepted."""
+    return check_range(name, theta, 0.0, np.pi / 2, why=" (radians)", ulps=ROUNDING_ULPS)
+
+
+def check_int(name: str, value, lo: int = 0) -> int:
+    """A Python/NumPy integer (not bool) ≥ lo, returned as a plain int."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < lo:
+        raise ValueError(f"{name} must be an int >= {lo}, got {value!r}")
+    return int(value)
 
 
 def check_choice(name: str, value, choices) -> None:
-    if value not in choices:
+    if not isinstance(value, str) or value not in choices:
         raise ValueError(f"unknown {name} {value!r}; expected one of {sorted(choices)}")

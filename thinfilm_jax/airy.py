@@ -29,13 +29,26 @@ def choose_base(film: Film, base: str = "auto") -> str:
     The dielectric path needs κ₃ = 0, η₂ ≥ η₁ and η₃ ≥ η₁ (no TIR). With traced fields
     (inside `jit`) "auto" cannot look at the values and takes the general path; pass
     ``base="dielectric"`` explicitly to specialise a jitted dielectric scene.
+    ``base="dielectric"`` with a concrete κ₃ > 0 (or a complex η₃) raises a ValueError: the
+    real path cannot represent absorption. With a traced κ₃ it is not checked (the
+    dielectric path reads η₃ only, so κ₃ is ignored there).
     """
-    if base != "auto":
-        V.check_choice("base", base, ("dielectric", "general"))
-        return base
-    if not all(V.is_concrete(x) for x in film):
-        return "general"
     import numpy as np
+
+    V.check_choice("base", base, ("auto", "dielectric", "general"))
+    if base == "dielectric":
+        if jnp.iscomplexobj(film.eta_base):
+            raise ValueError("base='dielectric' cannot represent a complex eta_base; use "
+                             "base='general' or 'auto'")
+        if V.is_concrete(film.kappa_base) and np.any(np.asarray(film.kappa_base) != 0):
+            raise ValueError(f"base='dielectric' needs kappa_base = 0 (real arithmetic, no "
+                             f"absorption); got kappa_base = "
+                             f"{float(np.max(np.asarray(film.kappa_base)))!r}: use "
+                             f"base='general' or 'auto'")
+    if base != "auto":
+        return base
+    if not all(V.is_concrete(x) for x in film) or any(jnp.iscomplexobj(x) for x in film):
+        return "general"
 
     k, e1, e2, e3 = (np.asarray(x) for x in (film.kappa_base, film.eta_outer, film.eta_film,
                                              film.eta_base))
@@ -81,10 +94,13 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, base: str = "auto") -
     """Unpolarised reflectance R(θ₁, λ) of `film` (SPEC §2, exact).
 
     Args:
-        film: `Film`; fields broadcast with the other arguments.
-        cos_theta: cos θ₁ ∈ [0, 1] in the outer medium.
+        film: `Film`; fields broadcast with the other arguments (a complex `eta_base` is
+            read as η₃ + iκ₃, `Film.real_base`).
+        cos_theta: cos θ₁ ∈ [0, 1] in the outer medium (excursions of a few ulps, e.g.
+            float32 cos(π/2) = −4.4e-8, are clamped).
         wavelength: λ in nm (> 0).
-        base: "auto" | "dielectric" | "general" (see `choose_base`).
+        base: "auto" | "dielectric" | "general" (see `choose_base`; "dielectric" with
+            κ₃ > 0 raises).
 
     Returns:
         R with the broadcast shape of all arguments, dtype following the inputs.
@@ -93,9 +109,9 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, base: str = "auto") -
         >>> float(airy_reflectance(Film(0.0, 1.5, 1.5), 1.0, 550.0))  # bare glass, 4 %
         0.04
     """
-    V.check_film(film)
-    V.check_cos_theta(cos_theta)
-    V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
+    film = V.check_film(film)
+    cos_theta = V.check_cos_theta(cos_theta)
+    wavelength = V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
     V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta),
                        ("wavelength", wavelength)])
     return _airy_jit(film, cos_theta, wavelength, choose_base(film, base))

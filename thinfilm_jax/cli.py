@@ -45,7 +45,10 @@ def _fit(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     p = argparse.ArgumentParser(prog="thinfilm-jax", description=__doc__)
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
     f7 = sub.add_parser("figure7", help="reproduce Figure 7 of Kneiphof et al. 2019",
@@ -90,8 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
-    return args.func(args)
+    from ._cli_checks import check_args, run_command
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    check_args(parser, args)  # out-of-range options: usage error before any work
+    return run_command(args)  # Ctrl-C and bad input found later: one line, no traceback
 
 
 if __name__ == "__main__":

@@ -351,7 +351,7 @@ def _covariance(res_x, x_free, args, n_obs, absolute_sigma):
     r = res_x(x_free, args)
     jac = jax.jacfwd(res_x)(x_free, args)  # (n, p)
     p = x_free.shape[0]
-    jtj = jac.T @ jac
+    jtj = jnp.matmul(jac.T, jac, precision=jax.lax.Precision.HIGHEST)
     scale = jnp.sqrt(jnp.diag(jtj))
     ok = scale > 0
     scale = jnp.where(ok, scale, 1.0)
@@ -455,10 +455,12 @@ def _check_batching(batching):
 
 
 def _check_scalar_film(film):
-    V.check_film(film)
+    """The checked, normalised `initial` film (complex eta_base folded into kappa_base)."""
+    film = V.check_film(film, "initial")
     for k, v in film._asdict().items():
         if np.shape(v) != ():
             raise ValueError(f"initial.{k} must be a scalar, got shape {np.shape(v)}")
+    return film
 
 
 def _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol):
@@ -591,7 +593,7 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
     """
     if not isinstance(initial, Film):
         raise TypeError(f"initial must be a thinfilm_jax.Film, got {type(initial).__name__}")
-    _check_scalar_film(initial)
+    initial = _check_scalar_film(initial)
     free = _check_free(free, PARAMS)
     V.check_choice("method", method, METHODS)
     if refine_method is not None:
@@ -601,27 +603,27 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
     V.check_choice("observer", observer, OBSERVERS)
     V.check_choice("shat", shat, SHAT_SOURCES)
     V.check_choice("ndf", ndf, ("ggx", "beckmann"))
-    if not (isinstance(terms, int) and terms >= 0):
-        raise ValueError(f"terms must be a non-negative int, got {terms!r}")
+    terms = V.check_int("terms", terms, 0)
     quadrature = _check_quadrature("quadrature", quadrature)
     start_quadrature = (quadrature if start_quadrature is None
                         else _check_quadrature("start_quadrature", start_quadrature))
     _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol)
     batching = _check_batching(batching)
-    theta_o = jnp.atleast_1d(jnp.asarray(theta_o))
+    theta_o = jnp.atleast_1d(jnp.asarray(V.as_array("theta_o", theta_o)))
     if theta_o.ndim != 1:
         raise ValueError(f"theta_o must be 1-D (n_angles,), got shape {theta_o.shape}")
-    V.check_range("theta_o", theta_o, 0.0, np.pi / 2, why=" (radians)")
+    theta_o = V.check_angle("theta_o", theta_o)
     if np.shape(alpha) != ():
         raise ValueError(f"alpha must be a scalar, got shape {np.shape(alpha)}")
-    V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-    observed = jnp.asarray(observed)
+    alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    observed = jnp.asarray(V.as_array("observed", observed))
     n_bands = get_observer(observer).n_bands
     if observed.shape != (theta_o.shape[0], n_bands):
         raise ValueError(f"observed must have shape (n_angles, n_bands) = "
                          f"({theta_o.shape[0]}, {n_bands}) to match theta_o and observer "
                          f"{observer!r}; got {observed.shape}")
-    V.check_finite("observed", observed)
+    observed = V.check_range("observed", observed, 0.0,
+                             why=" (patch radiances are non-negative)")
     if observed.size <= len(free):
         raise ValueError(f"{observed.size} observations cannot determine {len(free)} free "
                          f"parameters {free}")
@@ -638,8 +640,9 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
                    _n_candidates(y_starts, n_cols, n_solves), int(start_steps), int(max_steps),
                    bool(absolute_sigma), batching)
     box = tuple(jnp.asarray(b, dtype) for b in box)
-    sol, x, loss, resid, stderr, corr, start_loss = _fit_film_jit(
-        observed.astype(dtype), w, theta_o.astype(dtype), x0, y_starts, box, lut, cfg)
+    with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
+        sol, x, loss, resid, stderr, corr, start_loss = _fit_film_jit(
+            observed.astype(dtype), w, theta_o.astype(dtype), x0, y_starts, box, lut, cfg)
     film, alpha_fit = _split(x)
     return FitResult(film, alpha_fit, loss, sol.result == optx.RESULTS.successful,
                      sol.stats["num_steps"], dict(zip(free, stderr)), corr, free, resid,
@@ -731,18 +734,18 @@ def fit_spectrum(observed_R, wavelength, cos_theta, *, initial: Film,
     """
     if not isinstance(initial, Film):
         raise TypeError(f"initial must be a thinfilm_jax.Film, got {type(initial).__name__}")
-    _check_scalar_film(initial)
+    initial = _check_scalar_film(initial)
     free = _check_free(free, FILM_PARAMS)
     _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol)
     batching = _check_batching(batching)
-    wavelength = jnp.asarray(wavelength)
-    cos_theta = jnp.atleast_1d(jnp.asarray(cos_theta))
+    wavelength = jnp.asarray(V.as_array("wavelength", wavelength))
+    cos_theta = jnp.atleast_1d(jnp.asarray(V.as_array("cos_theta", cos_theta)))
     if wavelength.ndim != 1 or cos_theta.ndim != 1:
         raise ValueError(f"wavelength and cos_theta must be 1-D; got shapes {wavelength.shape}, "
                          f"{cos_theta.shape}")
-    V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
-    V.check_cos_theta(cos_theta)
-    observed_R = jnp.asarray(observed_R)
+    wavelength = V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
+    cos_theta = V.check_cos_theta(cos_theta)
+    observed_R = jnp.asarray(V.as_array("observed_R", observed_R))
     if observed_R.ndim == 1:
         observed_R = observed_R[None, :]
     shape = (cos_theta.shape[0], wavelength.shape[0])
@@ -764,9 +767,10 @@ def fit_spectrum(observed_R, wavelength, cos_theta, *, initial: Film,
                    _n_candidates(y_starts, n_cols, n_solves),
                    int(start_steps), int(max_steps), bool(absolute_sigma), batching)
     box = tuple(jnp.asarray(b, dtype) for b in box)
-    sol, x, loss, resid, stderr, corr, start_loss = _fit_spectrum_jit(
-        observed_R.astype(dtype), w, wavelength.astype(dtype), cos_theta.astype(dtype), x0,
-        y_starts, box, cfg)
+    with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
+        sol, x, loss, resid, stderr, corr, start_loss = _fit_spectrum_jit(
+            observed_R.astype(dtype), w, wavelength.astype(dtype), cos_theta.astype(dtype), x0,
+            y_starts, box, cfg)
     film, _ = _split(x)
     return FitResult(film, None, loss, sol.result == optx.RESULTS.successful,
                      sol.stats["num_steps"], dict(zip(free, stderr)), corr, free, resid,

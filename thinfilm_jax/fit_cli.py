@@ -25,7 +25,9 @@ angles of incidence.
   row per angle); optional ``"sigma"``.
 
 **Settings** (JSON keys, or CSV comment lines ``# key = value`` above the header, the
-value JSON or a bare word / comma list):
+value JSON or a bare word / comma list; a ``# key = value`` line below the header is an
+error, not silently ignored). Files are UTF-8 (a byte-order mark is allowed; UTF-16 with a
+byte-order mark is read too).
 
 * ``initial``: ``{"thickness": nm, "eta_film": ..., "eta_base": ..., "kappa_base": 0,
   "eta_outer": 1}``; ``eta_film`` and ``eta_base`` are required (fixed values or initial
@@ -47,6 +49,9 @@ Example CSV::
     10,0.04123,0.09212,0.04942
     ...
 
+The output may not be the input file itself nor a directory (checked before fitting); it is
+written atomically, so an interrupted run (Ctrl-C) leaves no partial file.
+
 The output JSON holds the input path, the kind, the settings used and the `FitResult`
 summary (`FitResult.to_dict`: fitted film, α, free parameters with standard errors,
 correlation matrix, degenerate pairs, loss, convergence, residuals).
@@ -57,6 +62,8 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
+import re
 from pathlib import Path
 
 #: Help text for the ``fit`` sub-command (argparse, RawDescriptionHelpFormatter).
@@ -69,7 +76,7 @@ patch colours: CSV columns theta_o_deg,R,G,B [,sigma] (X,Y,Z with observer=cie_1
   JSON {"theta_o_deg": [...], "observed": [[R,G,B], ...]}; setting alpha required.
 spectra: CSV columns wavelength_nm,R [,theta_deg] (long format), or
   JSON {"wavelength_nm": [...], "theta_deg": [...], "R": [[...], ...]}.
-settings: JSON keys or CSV comment lines '# key = value' above the header:
+settings: JSON keys or CSV comment lines '# key = value' above the header (UTF-8):
   initial = {"thickness": 400, "eta_film": 1.3, "eta_base": 2.0, "kappa_base": 0.5}
   free = thickness, eta_film     (Film fields and, for patches, alpha; default thickness)
   method = reference | filtered | ...   refine_method, observer, bounds, solver,
@@ -109,28 +116,55 @@ def _parse_setting(text):
 
 
 # ----------------------------------------------------------------------------- readers
+def read_text(path: Path) -> str:
+    """The text of `path`: UTF-8 (optional BOM) or UTF-16 with a BOM; else a clear error."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        _fail(path, f"cannot read: {e.strerror or e}")
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return data.decode("utf-16")
+        except UnicodeDecodeError as e:
+            _fail(path, f"invalid UTF-16 text at byte {e.start}")
+    if b"\x00" in data:  # valid UTF-8 in principle, never in a text file
+        _fail(path, "holds NUL bytes: looks like UTF-16 without a byte-order mark (or a "
+                    "binary file); save it as UTF-8")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        _fail(path, f"not UTF-8 text: byte 0x{data[e.start]:02x} on line {line} cannot be "
+                    f"decoded; save the file as UTF-8")
+
+
+_SETTING_LINE = re.compile(r"^#+\s*([A-Za-z_][A-Za-z0-9_]*)\s*=")
+
+
 def read_csv(path: Path) -> dict:
     """Observations and settings of a CSV file as the dict a JSON file would give."""
     settings, rows, header = {}, [], None
-    with open(path, newline="") as f:
-        for lineno, line in enumerate(f, 1):
-            s = line.strip()
-            if not s:
-                continue
-            if s.startswith("#"):
-                body = s.lstrip("#").strip()
-                if "=" in body and header is None:
-                    key, val = body.split("=", 1)
-                    settings[key.strip()] = _parse_setting(val)
-                continue
-            cells = next(csv.reader([s]))
-            if header is None:
-                header = [c.strip() for c in cells]
-                continue
-            if len(cells) != len(header):
-                _fail(path, f"line {lineno}: {len(cells)} values for {len(header)} columns "
-                            f"{header}")
-            rows.append((lineno, dict(zip(header, (c.strip() for c in cells)))))
+    for lineno, line in enumerate(read_text(path).splitlines(), 1):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            body = s.lstrip("#").strip()
+            if header is not None and _SETTING_LINE.match(s):
+                _fail(path, f"line {lineno}: setting {s!r} below the header line; settings "
+                            f"('# key = value') must come before the header")
+            if "=" in body and header is None:
+                key, val = body.split("=", 1)
+                settings[key.strip()] = _parse_setting(val)
+            continue
+        cells = next(csv.reader([s]))
+        if header is None:
+            header = [c.strip() for c in cells]
+            continue
+        if len(cells) != len(header):
+            _fail(path, f"line {lineno}: {len(cells)} values for {len(header)} columns "
+                        f"{header}")
+        rows.append((lineno, dict(zip(header, (c.strip() for c in cells)))))
     if header is None:
         _fail(path, "no header line (expected columns theta_o_deg,R,G,B or wavelength_nm,R)")
     if len(set(header)) != len(header):
@@ -197,8 +231,7 @@ def read_csv(path: Path) -> dict:
 
 def read_json(path: Path) -> dict:
     try:
-        with open(path) as f:
-            obs = json.load(f)
+        obs = json.loads(read_text(path))
     except json.JSONDecodeError as e:
         _fail(path, f"not valid JSON: {e}")
     if not isinstance(obs, dict):
@@ -212,8 +245,10 @@ def read_json(path: Path) -> dict:
 def read_observations(path) -> dict:
     """Read a CSV (``.csv``) or JSON (``.json``) observations file (module docstring)."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         _fail(path, "no such file")
+    if not path.is_file():
+        _fail(path, "not a file")
     suffix = path.suffix.lower()
     if suffix == ".csv":
         return read_csv(path)
@@ -309,14 +344,34 @@ def _settings(path, obs, kind):
 
 
 # ----------------------------------------------------------------------------- main
+def check_output(path: Path, out: Path, overwrite: bool) -> None:
+    """Refuse, before any work, an output that is the input, a directory, below a file, or
+    (without `overwrite`) an existing file."""
+    if out.exists() or out.is_symlink():
+        if out.is_dir():
+            raise SystemExit(f"thinfilm-jax fit: --out {out} is a directory; give a file path "
+                             f"such as {out / (path.stem + '.fit.json')}")
+        if path.exists() and out.exists() and os.path.samefile(path, out):
+            raise SystemExit(f"thinfilm-jax fit: --out {out} is the input file; refusing to "
+                             f"replace the observations with the result")
+        if not overwrite:
+            raise SystemExit(f"thinfilm-jax fit: {out} exists; pass --overwrite to replace it")
+    for parent in out.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise SystemExit(f"thinfilm-jax fit: --out {out}: {parent} is not a directory")
+            if not os.access(parent, os.W_OK | os.X_OK) and parent == out.absolute().parent:
+                raise SystemExit(f"thinfilm-jax fit: --out {out}: cannot write in {parent}")
+            break
+
+
 def run_fit_cli(args) -> int:
     """Entry point of ``thinfilm-jax fit`` (args.observations, args.out, args.overwrite)."""
     import numpy as np
 
     path = Path(args.observations)
     out = Path(args.out) if getattr(args, "out", None) else path.with_name(path.stem + ".fit.json")
-    if out.exists() and not getattr(args, "overwrite", False):
-        raise SystemExit(f"thinfilm-jax fit: {out} exists; pass --overwrite to replace it")
+    check_output(path, out, getattr(args, "overwrite", False))
     obs = read_observations(path)
     kind = obs.get("kind")
     if kind not in ("patch", "spectrum"):

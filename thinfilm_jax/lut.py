@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from . import _validate as V
 from .fresnel import complex_dtype
 from .spectra import DEFAULT_OBSERVER, get_observer, shat_host
 
@@ -79,6 +80,12 @@ def build_shat_lut(observer: str = DEFAULT_OBSERVER, *, d_mu: float = 25.0,
 
     Default resolution: Δμ = 25 nm, 128 σ samples on [0, 1000] nm (error in README).
     """
+    get_observer(observer)  # validates the name (plain or cross-band, see uplift)
+    d_mu = float(V.check_range("d_mu", d_mu, 0.0, lo_open=True, why=" (nm)"))
+    n_sigma = V.check_int("n_sigma", n_sigma, 2)
+    sigma_max = float(V.check_range("sigma_max", sigma_max, 0.0, lo_open=True, why=" (nm)"))
+    if mu_max is not None:
+        mu_max = float(V.check_range("mu_max", mu_max, 0.0, lo_open=True, why=" (nm)"))
     table, carrier, mmax, smax = _build(observer, float(d_mu), int(n_sigma), float(sigma_max),
                                         mu_max)
     cdt = complex_dtype(jnp.zeros((), dtype))
@@ -113,7 +120,8 @@ def lookup(lut: ShatLUT, mu, sigma) -> Array:
     ws = _catmull_rom(ts - fs).astype(lut.table.dtype)
     off = jnp.arange(4, dtype=jnp.int32)
     patch = lut.table[(im[..., None] + off)[..., :, None], (is_[..., None] + off)[..., None, :]]
-    env = jnp.einsum("...a,...b,...abj->...j", wm, ws, patch)
+    env = jnp.einsum("...a,...b,...abj->...j", wm, ws, patch,
+                     precision=jax.lax.Precision.HIGHEST)
     arg = (-2.0 * jnp.pi) * a[..., None] * lut.carrier
     val = env * jax.lax.complex(jnp.cos(arg), jnp.sin(arg))
     val = jnp.where((mu < 0)[..., None], jnp.conj(val), val)

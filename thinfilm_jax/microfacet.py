@@ -96,8 +96,27 @@ class PatchQuadrature(NamedTuple):
 
 # ----------------------------------------------------------------------------- helpers
 def _check_kind(kind):
-    if kind not in _KINDS:
+    if not isinstance(kind, str) or kind not in _KINDS:
         raise ValueError(f"kind must be one of {_KINDS}, got {kind!r}")
+
+
+def _check_orders(n_u, n_phi):
+    """Quadrature orders as plain ints: n_u >= 1, n_phi >= 2 (ValueError naming them)."""
+    from . import _validate as V
+
+    return V.check_int("n_u", n_u, 1), V.check_int("n_phi", n_phi, 2)
+
+
+def _check_view(theta_o, alpha, *, traced=True):
+    """θ_o ∈ [0, π/2] (radians), α ∈ (0, 1]; concrete values always, traced ones inside
+    `thinfilm_jax.checked` if `traced`."""
+    from . import _validate as V
+
+    if traced or V.is_concrete(theta_o):
+        theta_o = V.check_angle("theta_o", theta_o)
+    if traced or V.is_concrete(alpha):
+        alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    return theta_o, alpha
 
 
 def _asfloat(*xs):
@@ -321,9 +340,10 @@ def light_moments(quad: PatchQuadrature):
     a = jnp.sum(w, axis=-1)[..., None]
     a = jnp.where(a > 0, a, 1)
     dt = w.dtype
-    mean = jnp.einsum("...n,...ni->...i", w, wi) / a * jnp.asarray([1, 0, 1], dt)
+    hi = jax.lax.Precision.HIGHEST
+    mean = jnp.einsum("...n,...ni->...i", w, wi, precision=hi) / a * jnp.asarray([1, 0, 1], dt)
     mask = jnp.asarray([[1, 0, 1], [0, 1, 0], [1, 0, 1]], dt)
-    second = jnp.einsum("...n,...ni,...nj->...ij", w, wi, wi) / a[..., None] * mask
+    second = jnp.einsum("...n,...ni,...nj->...ij", w, wi, wi, precision=hi) / a[..., None] * mask
     cov = second - mean[..., :, None] * mean[..., None, :]
     return mean, (cov + jnp.swapaxes(cov, -1, -2)) / 2
 
@@ -354,8 +374,12 @@ def _normal_view_flat(alpha, n_u, n_phi, kind):
 
 
 def albedo(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx"):
-    """A(θ_o, α) = L[1] = Σ weight (broadcasts over θ_o and α; jit + vmap inside)."""
+    """A(θ_o, α) = L[1] = Σ weight (broadcasts over θ_o and α; jit + vmap inside).
+
+    θ_o ∈ [0, π/2] radians, α ∈ (0, 1], quadrature orders n_u ≥ 1, n_phi ≥ 2 (checked)."""
     _check_kind(kind)
+    n_u, n_phi = _check_orders(n_u, n_phi)
+    theta_o, alpha = _check_view(theta_o, alpha)
     return _vmapped(lambda t, a: _albedo_flat(t, a, n_u, n_phi, kind), theta_o, alpha)
 
 
@@ -365,6 +389,8 @@ def lobe_moments_normal_view(alpha, *, n_u=48, n_phi=48, kind="ggx"):
     This is the split-sum "ω_o = n = ω_r" kernel of a prefiltered environment map
     (Kneiphof et al. 2019, §3.2)."""
     _check_kind(kind)
+    n_u, n_phi = _check_orders(n_u, n_phi)
+    _, alpha = _check_view(0.0, alpha, traced=False)
     return _vmapped(lambda a: _normal_view_flat(a, n_u, n_phi, kind), alpha)
 
 
@@ -373,6 +399,7 @@ def splitsum_light_moments(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx"):
 
     μ = a ω_r,  Σ = e_t (I − ω_r ω_rᵀ) + e_z ω_r ω_rᵀ − μ μᵀ,  e_t = (1 − e_z)/2.  The rotated lobe
     is not clipped at the horizon (the split-sum approximation)."""
+    theta_o, alpha = _check_view(theta_o, alpha, traced=False)
     theta_o, alpha = jnp.broadcast_arrays(*_asfloat(theta_o, alpha))
     a, ez = lobe_moments_normal_view(alpha, n_u=n_u, n_phi=n_phi, kind=kind)
     r = jnp.stack([-jnp.sin(theta_o), jnp.zeros_like(theta_o), jnp.cos(theta_o)], axis=-1)

@@ -19,9 +19,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jax import Array
 
+from . import _validate as V
 from .film import Film
 from .fresnel import safe_div, safe_sqrt
 
@@ -46,7 +48,14 @@ def opd_of_cos(film: Film, cos_theta1) -> Array:
 
 
 def taylor_opd_moments(film: Film, mu_c, var_c) -> OPDMoments:
-    """μ_D, σ_D from the moments of c = ⟨ω_i, ω_o⟩ by the first-order chain K 25–28."""
+    """μ_D, σ_D from the moments of c = ⟨ω_i, ω_o⟩ by the first-order chain K 25–28.
+
+    Concrete inputs are checked (film domain, μ_c ∈ [−1, 1], σ_c² ≥ 0); traced ones are not.
+    """
+    if all(V.is_concrete(x) for x in (*film, mu_c, var_c)):
+        film = V.check_film(film)
+        mu_c = V.check_range("mu_c", mu_c, -1.0, 1.0, ulps=V.ROUNDING_ULPS, why=" (a cosine)")
+        var_c = V.check_range("var_c", var_c, 0.0, why=" (a variance)")
     k = film.eta_outer**2 / (2.0 * film.eta_film**2)
     mu_cos2 = safe_sqrt(1.0 + k * (mu_c - 1.0))
     sigma_c = safe_sqrt(var_c)
@@ -58,7 +67,7 @@ def taylor_opd_moments(film: Film, mu_c, var_c) -> OPDMoments:
 def project_light_moments(wo, mean, cov):
     """μ_c = ⟨ω_o, μ_ω⟩ and σ_c² = ω_oᵀ Σ_ω ω_o (K 20–21); vectors on the last axis."""
     mu_c = jnp.sum(wo * mean, axis=-1)
-    var_c = jnp.einsum("...i,...ij,...j->...", wo, cov, wo)
+    var_c = jnp.einsum("...i,...ij,...j->...", wo, cov, wo, precision=jax.lax.Precision.HIGHEST)
     return mu_c, jnp.maximum(var_c, 0.0)
 
 

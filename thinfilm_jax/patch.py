@@ -42,17 +42,18 @@ DEFAULT_QUADRATURE = (48, 48)
 
 
 def _check_patch_args(film, theta_o, alpha, method, observer, terms, shat, ndf):
-    V.check_film(film)
-    V.check_range("theta_o", theta_o, 0.0, np.pi / 2, why=" (radians)")
-    V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    """(film, theta_o, alpha, terms, broadcast shape), checked and normalised."""
+    film = V.check_film(film)
+    theta_o = V.check_angle("theta_o", theta_o)
+    alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
     V.check_choice("method", method, METHODS)
     V.check_choice("observer", observer, OBSERVERS)
     V.check_choice("shat", shat, SHAT_SOURCES)
     V.check_choice("ndf", ndf, ("ggx", "beckmann"))
-    if not (isinstance(terms, int) and terms >= 0):
-        raise ValueError(f"terms must be a non-negative int, got {terms!r}")
-    return V.check_broadcast([("film", np.zeros(film.shape)), ("theta_o", theta_o),
-                              ("alpha", alpha)])
+    terms = V.check_int("terms", terms, 0)
+    shape = V.check_broadcast([("film", np.zeros(film.shape)), ("theta_o", theta_o),
+                               ("alpha", alpha)])
+    return film, theta_o, alpha, terms, shape
 
 
 def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
@@ -77,7 +78,18 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
         batch_size: patches evaluated together (memory of the reference is
             batch_size · n_u · n_φ · n_λ).
     """
-    shape = _check_patch_args(film, theta_o, alpha, method, observer, terms, shat, ndf)
+    film, theta_o, alpha, terms, shape = _check_patch_args(film, theta_o, alpha, method,
+                                                           observer, terms, shat, ndf)
+    try:
+        quadrature = tuple(V.check_int(f"quadrature[{i}]", q, lo)
+                           for i, (q, lo) in enumerate(zip(quadrature, (1, 2), strict=True)))
+    except (TypeError, ValueError):
+        raise ValueError(f"quadrature must be a pair (n_u >= 1, n_phi >= 2) of ints, got "
+                         f"{quadrature!r}") from None
+    batch_size = V.check_int("batch_size", batch_size, 1)
+    if lut is not None and not isinstance(lut, ShatLUT):
+        raise TypeError(f"lut must be a ShatLUT (build_shat_lut) or None, got "
+                        f"{type(lut).__name__}")
     dtype = jnp.result_type(theta_o, alpha, *film, float)
     if shat == "lut" and lut is None:
         lut = build_shat_lut(observer, dtype=dtype)
@@ -106,7 +118,7 @@ def patch_one(film: Film, theta_o, alpha, *, method, observer, terms=2, shat="ex
     quad = patch_quadrature(theta_o, alpha, n_u=n_u, n_phi=n_phi, kind=ndf)
     if method == "reference":
         rj = spectral_bands(film, quad.cos_hi, observer, base=base)  # (N, J)
-        return quad.weight @ rj
+        return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
     albedo = jnp.sum(quad.weight)
     if method == "ideal":
         return albedo * fourier_bands(film, jnp.cos(theta_o), observer, terms=terms,
@@ -131,8 +143,14 @@ def patch_radiance_mc(film: Film, theta_o: float, alpha: float, key, *, n_sample
     """Monte Carlo estimate of the reference L_j for one patch: (mean (J,), standard error (J,)).
 
     Independent of the deterministic quadrature: h ~ D cos θ_h over the full azimuth.
+    `n_samples` ≥ 2 (the standard error needs two); film fields, θ_o and α scalars.
     """
-    _check_patch_args(film, theta_o, alpha, "reference", observer, 0, "exact", ndf)
+    film, theta_o, alpha, _, shape = _check_patch_args(film, theta_o, alpha, "reference",
+                                                       observer, 0, "exact", ndf)
+    if shape != ():
+        raise ValueError(f"patch_radiance_mc evaluates one patch: film fields, theta_o and "
+                         f"alpha must be scalars; got broadcast shape {shape}")
+    n_samples = V.check_int("n_samples", n_samples, 2)
     return _mc_jit(film, theta_o, alpha, key, n_samples, observer, ndf, choose_base(film, base))
 
 
@@ -140,4 +158,4 @@ def patch_radiance_mc(film: Film, theta_o: float, alpha: float, key, *, n_sample
 def _mc_jit(film, theta_o, alpha, key, n, observer, ndf, base):
     q = sample_patch_mc(key, theta_o, alpha, n, kind=ndf)
     vals = n * q.weight[:, None] * spectral_bands(film, q.cos_hi, observer, base=base)
-    return jnp.mean(vals, axis=0), jnp.std(vals, axis=0, ddof=1) / np.sqrt(n)
+    return jnp.mean(vals, axis=0), jnp.std(vals, axis=0, ddof=1) / float(np.sqrt(n))

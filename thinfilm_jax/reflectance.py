@@ -9,7 +9,6 @@ r"""Band-integrated reflectance R_j(θ₁) of a film (SPEC §4, K 2–4).
 from __future__ import annotations
 
 import functools
-import numbers
 
 import jax
 import jax.numpy as jnp
@@ -44,15 +43,13 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
         >>> rgb_reflectance(film, 1.0).shape
         (3,)
     """
-    V.check_film(film)
-    V.check_cos_theta(cos_theta)
+    film = V.check_film(film)
+    cos_theta = V.check_cos_theta(cos_theta)
     V.check_choice("observer", observer, ("stiles_burch_1959_10", "cie_1931_2"))
     V.check_choice("method", method, METHODS)
     V.check_choice("shat", shat, SHAT_METHODS)
     # any integer type (np.arange(...) elements too), not bool; a plain int for the jit cache
-    if isinstance(terms, bool) or not isinstance(terms, numbers.Integral) or terms < 0:
-        raise ValueError(f"terms must be a non-negative int, got {terms!r}")
-    terms = int(terms)
+    terms = V.check_int("terms", terms, 0)
     V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta)])
     return _rgb_jit(film, cos_theta, observer, method, terms, shat, choose_base(film, base))
 
@@ -73,7 +70,7 @@ def spectral_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, base="ge
     ifc = film_interfaces(film, cos_theta, base=base)
     ifc = jax.tree.map(lambda a: a[..., None], ifc)  # wavelength axis last
     r = jnp.mean(polarised_reflectance(ifc, jnp.asarray(film.thickness)[..., None], lam), axis=0)
-    return r @ jnp.asarray(obs.weights, r.dtype)
+    return jnp.matmul(r, jnp.asarray(obs.weights, r.dtype), precision=jax.lax.Precision.HIGHEST)
 
 
 def fourier_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, terms=2,

@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from . import _validate as V
 from .film import Film
 from .fresnel import as_complex, film_interfaces, safe_div
 
@@ -50,7 +51,19 @@ class SeriesTerms(NamedTuple):
 
 
 def series_terms(film: Film, cos_theta, *, base: str = "general") -> SeriesTerms:
-    """C₀, R* − T₁₂₁, z = r₂₁r₂₃ and D of `film` at cos θ₁ (inputs pre-broadcast)."""
+    """C₀, R* − T₁₂₁, z = r₂₁r₂₃ and D of `film` at cos θ₁ (inputs pre-broadcast).
+
+    Concrete inputs are checked like `airy_reflectance`'s (film domain, cos θ₁ ∈ [0, 1],
+    `base` "dielectric" or "general", κ₃ = 0 on the dielectric path); traced ones are not.
+    """
+    V.check_choice("base", base, ("dielectric", "general"))
+    if all(V.is_concrete(x) for x in (*film, cos_theta)):
+        from .airy import choose_base
+
+        film = V.check_film(film)
+        cos_theta = V.check_cos_theta(cos_theta)
+        V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta)])
+        choose_base(film, base)
     ifc = film_interfaces(film, cos_theta, base=base)
     r12, r23 = ifc.r12, ifc.r23
     R12 = jnp.real(r12) ** 2 + jnp.imag(r12) ** 2

@@ -107,6 +107,10 @@ def sensitivity_ft(x, observer=DEFAULT_OBSERVER, *, sigma2=None, method: str = "
     """
     V.check_choice("method", method, SHAT_METHODS)
     obs = _observer(observer)
+    if V.is_concrete(x):  # traced values (internal calls under jit) are not checked
+        x = V.check_finite("x", x)
+    if sigma2 is not None and V.is_concrete(sigma2):
+        sigma2 = V.check_range("sigma2", sigma2, 0.0, why=" (variance, nm²)")
     x = jnp.asarray(x)
     dtype = jnp.result_type(x, float)
     if method == "gaussian":

@@ -171,30 +171,32 @@ def shat_at_zero(observer=DEFAULT_OBSERVER, dtype=jnp.float64, method: str = "ta
 # ----------------------------------------------------------------------------------------
 
 
-def _gaussian_ft(x, sigma2, params):
+def _gaussian_ft(x, sigma2, params, xp=jnp):
     r"""Closed-form Ŝ of a Gaussian mixture in ν, optionally filtered by x ~ N(x, σ²).
 
     For one component a·N(ν; ν₀, s²): Ŝ(x) = a exp(−2πixν₀ − 2π²s²x²). With
     x ~ N(μ, σ²), E[exp(−A x² + c x)] = (1 + 2Aσ²)^{-1/2} exp((c²σ² + 2cμ − 2Aμ²)/(2(1+2Aσ²)))
-    with A = 2π²s², c = −2πiν₀.
+    with A = 2π²s², c = −2πiν₀. `xp` = jax.numpy (`sensitivity_ft`) or numpy (the host
+    residual of `gaussian_fit`): one implementation of the closed form.
     """
     if sigma2 is not None:
-        x, sigma2 = jnp.broadcast_arrays(x, jnp.asarray(sigma2, params.dtype))
+        x, sigma2 = xp.broadcast_arrays(x, xp.asarray(sigma2, params.dtype))
     params = params.reshape((1,) * x.ndim + params.shape)  # ranks aligned explicitly
     a, nu0, s = params[..., 0], params[..., 1], params[..., 2]  # (..., J, G)
     xx = x[..., None, None]
-    big_a = 2.0 * jnp.pi**2 * s**2
+    big_a = 2.0 * np.pi**2 * s**2
     # c = −2πiν₀ is imaginary, c² = −4π²ν₀² real: split the exponent into real parts.
     if sigma2 is None:
-        mag = a * jnp.exp(-big_a * xx**2)
-        arg = -2.0 * jnp.pi * nu0 * xx
+        mag = a * xp.exp(-big_a * xx**2)
+        arg = -2.0 * np.pi * nu0 * xx
     else:
         s2 = sigma2[..., None, None]
         den = 1.0 + 2.0 * big_a * s2
-        mag = a / jnp.sqrt(den) * jnp.exp((-4.0 * jnp.pi**2 * nu0**2 * s2 - 2.0 * big_a * xx**2)
-                                          / (2.0 * den))
-        arg = -2.0 * jnp.pi * nu0 * xx / den
-    return jnp.sum(jax.lax.complex(mag * jnp.cos(arg), mag * jnp.sin(arg)), axis=-1)
+        mag = a / xp.sqrt(den) * xp.exp((-4.0 * np.pi**2 * nu0**2 * s2 - 2.0 * big_a * xx**2)
+                                        / (2.0 * den))
+        arg = -2.0 * np.pi * nu0 * xx / den
+    re, im = xp.sum(mag * xp.cos(arg), axis=-1), xp.sum(mag * xp.sin(arg), axis=-1)
+    return jax.lax.complex(re, im) if xp is jnp else re + 1j * im
 
 
 @functools.cache
@@ -233,10 +235,7 @@ def gaussian_fit(observer: str = DEFAULT_OBSERVER, n_gauss: int = 3) -> np.ndarr
         p0 = np.concatenate(params)
 
         def ft_resid(p, j=j):
-            pr = p.reshape(-1, 3)
-            a, nu0, s = pr[:, 0], pr[:, 1], pr[:, 2]
-            v = (a * np.exp(-2j * np.pi * xs[:, None] * nu0 - 2 * np.pi**2 * s**2 * xs[:, None] ** 2)).sum(1)
-            d = v - target[:, j]
+            d = _gaussian_ft(xs, None, p.reshape(1, -1, 3), xp=np)[:, 0] - target[:, j]
             return np.concatenate([d.real, d.imag])
 
         p = least_squares(ft_resid, p0, x_scale=np.tile([1e-1, 1e-4, 1e-5], n_gauss)).x

@@ -13,4 +13,5 @@ def test_layout_matches_tree():
     package = ROOT / "thinfilm_jax"
     modules = sorted(str(p.relative_to(package)) for p in package.rglob("*.py"))
     assert len(listed) == len(set(listed)), "a module is listed twice"
-    assert sorted(listed) == modules
+    missing, extra = sorted(set(modules) - set(listed)), sorted(set(listed) - set(modules))
+    assert not missing and not extra, f"add to README Layout: {missing}; remove: {extra}"

@@ -238,7 +238,9 @@ def test_diagonal_equals_cross_band_under_white_light():
     for method in ("ideal", "filtered"):
         a = envmap_radiance(FILM, 0.3, Z, v, const, method=method)
         b = envmap_radiance(FILM, 0.3, Z, v, const, method=method, cross_band=False)
-        np.testing.assert_allclose(a, b, atol=2e-3 if method == "filtered" else 1e-12)
+        # Σ_k R_jk = R_j exactly; the two paths differ only by their Ŝ tables' interpolation
+        # (ideal) and, for K 29, by luminance-weighted vs per-band moments of the same lobe
+        np.testing.assert_allclose(a, b, atol=2e-3 if method == "filtered" else 1e-6)
 
 
 def test_per_channel_moments_option(forest):

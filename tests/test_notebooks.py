@@ -36,3 +36,9 @@ def test_figure7_notebook(tmp_path):
 def test_error_vs_runtime_notebook(tmp_path):
     run_notebook("error_vs_runtime.ipynb", tmp_path, {"THINFILM_NB_RUN": "tiny",
                                                       "THINFILM_NB_OUT": str(tmp_path)})
+
+
+@pytest.mark.slow
+def test_ibl_notebook(tmp_path):
+    run_notebook("ibl.ipynb", tmp_path, {"THINFILM_NB_RESOLUTION": "12",
+                                         "THINFILM_NB_SMALL_MAP": "1"})

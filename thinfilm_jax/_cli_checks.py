@@ -28,7 +28,7 @@ NUMERIC = {
     "exposure": (0.0, None, True, float),
 }
 #: sub-commands whose --out is a folder
-FOLDER_OUT = ("figure7", "bench")
+FOLDER_OUT = ("figure7", "bench", "render")
 
 
 def _flag(name: str) -> str:

@@ -172,9 +172,14 @@ def lookup_nearest(image, omega) -> Array:
     return image[i, j]
 
 
-def lookup_bilinear(image, omega) -> Array:
-    """Bilinear interpolation of texel-centre values at ω (wraps in φ, clamps at the poles)."""
-    h, w = image.shape[0], image.shape[1]
+def lookup_bilinear(image, omega, layer=None) -> Array:
+    """Bilinear interpolation of texel-centre values at ω (wraps in φ, clamps at the poles).
+
+    image: (h, w, ...) or, with `layer` (integer array broadcasting with ω's leading
+    axes), a stack (L, h, w, ...) read at image[layer]."""
+    if layer is None:
+        image, layer = image[None], jnp.zeros(omega.shape[:-1], jnp.int32)
+    h, w = image.shape[1], image.shape[2]
     u, v = to_equirect(omega)
     x = u * w - 0.5
     y = jnp.clip(v * h - 0.5, 0.0, h - 1.0)
@@ -184,10 +189,10 @@ def lookup_bilinear(image, omega) -> Array:
     j1 = jnp.mod(j0 + 1, w)
     i0 = y0.astype(jnp.int32)
     i1 = i0 + 1
-    fx = fx.reshape(fx.shape + (1,) * (image.ndim - 2))
-    fy = fy.reshape(fy.shape + (1,) * (image.ndim - 2))
-    top = image[i0, j0] * (1 - fx) + image[i0, j1] * fx
-    bot = image[i1, j0] * (1 - fx) + image[i1, j1] * fx
+    fx = fx.reshape(fx.shape + (1,) * (image.ndim - 3))
+    fy = fy.reshape(fy.shape + (1,) * (image.ndim - 3))
+    top = image[layer, i0, j0] * (1 - fx) + image[layer, i0, j1] * fx
+    bot = image[layer, i1, j0] * (1 - fx) + image[layer, i1, j1] * fx
     return top * (1 - fy) + bot * fy
 
 

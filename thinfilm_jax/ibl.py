@@ -7,7 +7,7 @@ $$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega
 |-------------|------------------------------------------------------------------------------|
 | `reference` | texel-space quadrature of the piecewise-constant map: s×s Gauss–Legendre nodes in (cos θ, φ) inside every texel (exact solid-angle measure), R_jk(c) exact spectral on a fine c-grid, interpolated |
 | `mc`        | GGX visible-normal sampling (Heitz 2018), weight G₂/G₁, exact spectral R_jk per sample, nearest-texel radiance; fixed key and count |
-| `ideal`     | A(θ_o, α) · Σ_k R_jk(cos θ_o) P_k(ω_r, α): BB17 under the split sum (`kernels.ideal_kernel`) |
+| `ideal`     | A(θ_o, α) · Σ_k R_jk(cos θ_o) P_k(ω_r, α): BB17 under the split sum (`kernels.ideal_kernel`, Ŝ from the LUT at σ = 0 by default) |
 | `filtered`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_r, α), R̄ = K 29 with the prefiltered moments μ_ω, Σ_ω (`kernels.filtered_kernel`) |
 
 R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the per-channel
@@ -38,6 +38,7 @@ from .envmap import EnvMap, load_envmap, lookup_nearest, texel_solid_angles
 from .film import Film
 from .filtered import SHAT_SOURCES
 from .kernels import filtered_kernel, ideal_kernel
+from .lut import build_shat_lut
 from .microfacet import ndf, smith_g1, smith_g2
 from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered,
                         moments_to_mean_cov, prefilter_envmap)
@@ -71,7 +72,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         subdivisions: s Gauss nodes per axis inside each texel (reference); None = auto.
         n_cos: nodes of the reference's R_jk(cos θ₁) table.
         n_samples, key: Monte Carlo sample count and PRNG key (default key 0).
-        batch_size: shading points evaluated together by the exact methods.
+        batch_size: shading points evaluated together (default: 65536 for the real-time
+            methods, about 2¹⁹ quadrature nodes' worth for the exact ones).
         base: "auto" | "general" | "dielectric" Fresnel arithmetic.
     Shading points with ⟨n, ω_o⟩ ≤ 0 give 0.
     """
@@ -112,7 +114,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         if shat == "lut" and pref.lut.table.shape[-1] != 3 * len(_bands(observer)):
             raise ValueError("the PrefilteredEnvMap was built for another observer")
         cfg = (method, observer, terms, shat, bool(cross_band), base)
-        return _realtime_jit(Film(*args[:5]), args[5], *nv, pref, cfg)
+        return _realtime_jit(Film(*args[:5]), args[5], *nv, pref, cfg,
+                             int(batch_size or 65536))
     n_pts = int(np.prod(shape))
     if method == "reference":
         if subdivisions is None:
@@ -146,13 +149,30 @@ def _bands(observer):
 
 def _batch(batch_size, n_pts, per_point):
     if batch_size is None:
-        batch_size = max(1, int(2**23 // max(per_point, 1)))
+        batch_size = max(1, int(2**19 // max(per_point, 1)))
     return int(max(1, min(batch_size, max(n_pts, 1))))
 
 
 # ----------------------------------------------------------------------------- real time
-@functools.partial(jax.jit, static_argnums=(5,))
-def _realtime_jit(film, alpha, normal, view, pref, cfg):
+@functools.partial(jax.jit, static_argnums=(5, 6))
+def _realtime_jit(film, alpha, normal, view, pref, cfg, chunk):
+    """Flatten the shading points and shade them `chunk` at a time (bounded memory)."""
+    shape = alpha.shape
+    flat = [x.reshape(-1) for x in (*film, alpha)] + [v.reshape(-1, 3) for v in (normal, view)]
+    n = flat[0].shape[0]
+    if n <= chunk:
+        out = _realtime_points(Film(*flat[:5]), *flat[5:], pref, cfg)
+    else:
+        m = -(-n // chunk)
+        padded = [jnp.pad(x, [(0, m * chunk - n)] + [(0, 0)] * (x.ndim - 1), mode="edge")
+                  for x in flat]
+        out = jax.lax.map(lambda xs: _realtime_points(Film(*xs[:5]), *xs[5:], pref, cfg),
+                          [x.reshape((m, chunk) + x.shape[1:]) for x in padded])
+        out = out.reshape(m * chunk, -1)[:n]
+    return out.reshape(*shape, out.shape[-1])
+
+
+def _realtime_points(film, alpha, normal, view, pref, cfg):
     method, observer, terms, shat, cross, base = cfg
     cos_o = jnp.sum(normal * view, axis=-1)
     up = cos_o > 0
@@ -163,11 +183,10 @@ def _realtime_jit(film, alpha, normal, view, pref, cfg):
     a = lookup_albedo(pref, co, sqa)
     obs = cross_band_name(observer) if cross else observer
     lut = pref.lut if cross else None
-    if shat == "lut" and not cross:
-        from .lut import build_shat_lut  # the diagonal path needs the plain bands' table
+    if shat == "lut" and not cross:  # the diagonal path reads the plain bands' table
         lut = build_shat_lut(observer, dtype=alpha.dtype)
     if method == "ideal":
-        r = ideal_kernel(film, co, observer=obs, terms=terms, base=base)
+        r = ideal_kernel(film, co, observer=obs, terms=terms, shat=shat, lut=lut, base=base)
     else:
         if pref.per_channel:  # moments of channel k drive R_jk (..., 3[k], 9)
             mean, cov = moments_to_mean_cov(mom)

@@ -6,7 +6,7 @@ leading axes, trace-safe (no validation: the public integrators validate), and c
 float32 (every contraction states its precision).
 
 * `ideal_kernel` — BB17 real time, the film at the ideal reflection direction (h = n):
-  R_j(cos θ_o) by the truncated Fourier sum (K 4). Multiply by A(θ_o, α) (and, under an
+  R_j(cos θ_o) by the truncated Fourier sum (K 4), which is K 29 with σ_D = 0. Multiply by A(θ_o, α) (and, under an
   environment, by the prefiltered radiance) for the `ideal` method.
 * `filtered_kernel` — Kneiphof et al. 2019 (K 29) from the mean μ_ω and covariance Σ_ω of
   the light direction: μ_c = ⟨ω_o, μ_ω⟩, σ_c² = ω_oᵀ Σ_ω ω_o (K 20–21); μ_D, σ_D by the
@@ -31,7 +31,8 @@ from .film import Film
 from .filtered import filtered_bands
 from .lut import ShatLUT
 from .microfacet import light_moments, patch_quadrature
-from .opd import cos_incidence_from_projection, project_light_moments, taylor_opd_moments
+from .opd import (OPDMoments, cos_incidence_from_projection, opd_of_cos, project_light_moments,
+                  taylor_opd_moments)
 from .reflectance import fourier_bands
 from .spectra import DEFAULT_OBSERVER
 
@@ -39,18 +40,26 @@ __all__ = ["ideal_kernel", "filtered_kernel", "lobe_moments"]
 
 
 def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2,
-                 shat: str = "tabulated", base: str = "general") -> Array:
+                 shat: str = "exact", lut: ShatLUT | None = None,
+                 base: str = "general") -> Array:
     """R_j(cos θ_o) by K 4 with M = `terms`, shape broadcast(film, cos_o) + (J,).
 
     Args:
         film: `Film`.
         cos_o: cos θ_o ∈ [0, 1] (the ideal reflection: cos θ₁ = cos θ_o).
-        observer: observer name or `spectra.Observer` (e.g. the cross-band observer of IBL).
+        observer: observer name (plain or cross-band, `uplift`).
         terms: M ≥ 0 Fourier orders.
-        shat: "tabulated" (exact Ŝ on the observer's samples) or "gaussian" (BB17 fit).
+        shat: Ŝ source, as for `filtered_kernel`: "exact" (quadrature on the observer's
+            samples), "lut" (the Ŝ(μ, σ²) table read at σ = 0: K 29 with σ_D = 0) or
+            "gaussian" (BB17's closed form).
         base: "general" (complex η₃ + iκ₃) or "dielectric" (κ₃ = 0 only).
     """
-    return fourier_bands(film, cos_o, observer, terms=terms, shat=shat, base=base)
+    if shat == "lut":
+        opd = OPDMoments(opd_of_cos(film, cos_o), jnp.zeros_like(jnp.asarray(cos_o)))
+        return filtered_bands(film, cos_o, opd, observer, terms=terms, shat="lut", lut=lut,
+                              base=base)
+    return fourier_bands(film, cos_o, observer, terms=terms,
+                         shat="gaussian" if shat == "gaussian" else "tabulated", base=base)
 
 
 def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, terms: int = 2,

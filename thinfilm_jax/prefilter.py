@@ -190,18 +190,12 @@ def _level_lerp(pref: PrefilteredEnvMap, sqrt_alpha):
 def lookup_prefiltered(pref: PrefilteredEnvMap, omega_r, sqrt_alpha):
     """(P (..., 3), moments (..., 9) or (..., 3, 9)) at the reflection direction and √α."""
     i0, f = _level_lerp(pref, sqrt_alpha)
-
-    def level(table, i):
-        return jax.vmap(lambda tb, d: lookup_bilinear(tb, d))(table[i.reshape(-1)],
-                                                              omega_r.reshape(-1, 3))
-
     out = []
     for table in (pref.radiance, pref.moments):
-        a = level(table, i0)
-        b = level(table, i0 + 1)
-        ff = f.reshape((-1,) + (1,) * (a.ndim - 1))
-        v = a * (1 - ff) + b * ff
-        out.append(v.reshape(omega_r.shape[:-1] + v.shape[1:]))
+        lo = lookup_bilinear(table, omega_r, i0)
+        hi = lookup_bilinear(table, omega_r, i0 + 1)
+        ff = f.reshape(f.shape + (1,) * (lo.ndim - f.ndim))
+        out.append(lo * (1 - ff) + hi * ff)
     return tuple(out)
 
 

@@ -74,7 +74,18 @@ def trapezoid_weights(x: np.ndarray) -> np.ndarray:
 
 @functools.cache
 def get_observer(name: str = DEFAULT_OBSERVER) -> Observer:
-    """The `Observer` called `name` (one of `OBSERVERS`), built once from colour-science."""
+    """The `Observer` called `name` (one of `OBSERVERS`), built once from colour-science.
+
+    `uplift.cross_band_name(name)` (e.g. "stiles_burch_1959_10+mallett2019") gives the J·K
+    cross bands S_j B_k of image-based lighting (SPEC §9, `uplift`)."""
+    from . import uplift
+
+    if isinstance(name, str) and name.endswith(uplift.SEPARATOR + uplift.BASIS):
+        base = get_observer(name[: -len(uplift.SEPARATOR + uplift.BASIS)])
+        names = tuple(f"{j}·{k}" for j in base.band_names for k in ("r", "g", "b"))
+        return Observer(name, base.wavelengths,
+                        uplift.cross_band_weights(base.wavelengths, base.weights),
+                        base.areas, names)
     V.check_choice("observer", name, OBSERVERS)
     import colour
 
@@ -157,11 +168,12 @@ def shat_at_zero(observer=DEFAULT_OBSERVER, dtype=jnp.float64, method: str = "ta
     """Ŝ_j(0) of the C₀ term, shape (n_bands,).
 
     "tabulated": Σ_k W_kj (= 1 up to rounding), which keeps SPEC §4's identity exact on the
-    shared samples. "gaussian": exactly 1, the unit area of each band (the fit's own Ŝ(0) is
-    only approximately 1; C₀ must not inherit that fitting error).
+    shared samples. "gaussian": the exact area of each band, 1 for the unit-area bands (the
+    fit's own Ŝ(0) is only approximately right; C₀ must not inherit that fitting error) and
+    ∫ S_j B_k dλ for the cross bands of `uplift`.
     """
     obs = _observer(observer)
-    if method == "gaussian":
+    if method == "gaussian" and obs.areas.shape[0] == obs.n_bands:
         return jnp.ones(obs.n_bands, dtype)
     return jnp.asarray(obs.weights.sum(axis=0), dtype)
 

@@ -1,0 +1,192 @@
+"""IBL benchmark: frame throughput of every method and the error of every real-time option.
+
+Run: ``python -m thinfilm_jax.studies.ibl_bench [--out figures] [--quick]`` (CPU, or the
+default JAX device). Writes ``ibl_bench.json`` and ``ibl_bench.md``.
+
+1. Throughput: a 2560 × 1440 frame of shading points (sphere-like normals facing the
+   camera, per-pixel α ∈ [0.05, 0.6] and d ∈ [250, 850] nm), float32, per real-time
+   method and option; compile time (first call − warm call) reported apart from the warm
+   time. The reference (float64) is timed on a few hundred points: points/s.
+2. Accuracy of the real-time options against the reference on a 48 px sphere under each
+   shipped map at α = 0.1 and 0.35 (between prefilter levels) (ΔE₀₀ mean / p95): cross-band vs diagonal, luminance vs per-channel moments,
+   LUT vs exact vs Gaussian Ŝ, prefilter resolution and number of roughness levels.
+No timing is asserted anywhere; the README quotes the committed JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._io import atomic_write, write_json
+from ..colorimetry import delta_e2000
+from ..envmap import SHIPPED, load_envmap
+from ..film import Film
+from ..ibl import envmap_radiance
+from ..prefilter import prefilter_envmap
+from .render import camera, sphere
+
+F32 = jnp.float32
+
+
+def _to32(tree):
+    return jax.tree.map(lambda x: x.astype(jnp.complex64 if jnp.iscomplexobj(x) else F32), tree)
+
+
+def frame_inputs(width: int, height: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1, 1, (height, width))
+    y = rng.uniform(-1, 1, (height, width))
+    r2 = np.minimum(x * x + y * y, 0.99)
+    n = np.stack([x, -np.sqrt(1 - r2), y], -1)  # facing the camera at −y
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    view = np.array([0.0, -1.0, 0.0])
+    alpha = 0.05 + 0.55 * rng.uniform(size=(height, width))
+    d = 250 + 600 * rng.uniform(size=(height, width))
+    film = Film(d.astype(np.float32), np.float32(1.2), np.float32(2.0), np.float32(0.0))
+    return film, alpha.astype(np.float32), n.astype(np.float32), view.astype(np.float32)
+
+
+def _time(fn, repeats=1):
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn())
+    first = time.perf_counter() - t0
+    warm = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn())
+        warm.append(time.perf_counter() - t0)
+    w = float(np.median(warm))
+    return {"compile_s": max(first - w, 0.0), "warm_s": w}
+
+
+REALTIME_VARIANTS = (
+    ("ideal", dict(method="ideal")),
+    ("ideal, diagonal", dict(method="ideal", cross_band=False)),
+    ("filtered (LUT)", dict(method="filtered")),
+    ("filtered, Gaussian Ŝ", dict(method="filtered", shat="gaussian")),
+    ("filtered, diagonal", dict(method="filtered", cross_band=False)),
+)
+
+
+def throughput(width=2560, height=1440, envmap="venice_sunset", verbose=True):
+    env = load_envmap(envmap)
+    pref = _to32(prefilter_envmap(env))
+    film, alpha, n, view = frame_inputs(width, height)
+    rows = []
+    for name, kw in REALTIME_VARIANTS:
+        t = _time(lambda kw=kw: envmap_radiance(film, alpha, n, view, pref, **kw))
+        t.update(name=name, points=width * height, points_per_s=width * height / t["warm_s"])
+        rows.append(t)
+        if verbose:
+            print(f"  {name:24s} {t['warm_s']:8.3f} s/frame  compile {t['compile_s']:6.2f} s")
+    base = {r["name"]: r["warm_s"] for r in rows}
+    for r in rows:
+        r["vs_ideal"] = r["warm_s"] / base["ideal"]
+    m = 256
+    f64 = Film(np.asarray(film.thickness[0, :m], float), 1.2, 2.0, 0.0)
+    t = _time(lambda: envmap_radiance(f64, np.asarray(alpha[0, :m], float).clip(0.2),
+                                      np.asarray(n[0, :m], float) / np.linalg.norm(
+                                          np.asarray(n[0, :m], float), axis=-1, keepdims=True),
+                                      view.astype(float), env))
+    t.update(name="reference (float64, α ≥ 0.2)", points=m, points_per_s=m / t["warm_s"])
+    rows.append(t)
+    if verbose:
+        print(f"  {t['name']:24s} {t['points_per_s']:8.1f} points/s")
+    return rows
+
+
+OPTION_VARIANTS = (
+    ("ideal", {}, dict(method="ideal")),
+    ("filtered (default: LUT, cross-band, luminance moments, 64×128, 17 levels)", {},
+     dict(method="filtered")),
+    ("filtered, diagonal R_j P_j", {}, dict(method="filtered", cross_band=False)),
+    ("filtered, per-channel moments", dict(moments="per_channel"), dict(method="filtered")),
+    ("filtered, exact Ŝ", {}, dict(method="filtered", shat="exact")),
+    ("filtered, Gaussian Ŝ", {}, dict(method="filtered", shat="gaussian")),
+    ("filtered, M = 1", {}, dict(method="filtered", terms=1)),
+    ("filtered, 32×64 prefilter", dict(resolution=(32, 64)), dict(method="filtered")),
+    ("filtered, 9 levels", dict(levels=9), dict(method="filtered")),
+    ("filtered, 33 levels", dict(levels=33), dict(method="filtered")),
+)
+
+
+def option_errors(resolution=48, alphas=(0.1, 0.35), maps=tuple(SHIPPED), verbose=True):
+    film = Film(600.0, 1.2, 2.0, 0.0)
+    out = {name: [] for name, _, _ in OPTION_VARIANTS}
+    for name_map in maps:
+        env = load_envmap(name_map)
+        wo, right, up = camera(0.7, 15.0)
+        mask, n = sphere(resolution, wo, right, up)
+        pts = n[mask]
+        prefs = {}
+        for alpha in alphas:
+            ref = np.asarray(envmap_radiance(film, alpha, pts, wo, env))
+            e = 0.9 / np.percentile(ref[:, 1], 99)
+            for name, pkw, kw in OPTION_VARIANTS:
+                key = tuple(sorted(pkw.items()))
+                if key not in prefs:
+                    prefs[key] = prefilter_envmap(env, **pkw)
+                got = np.asarray(envmap_radiance(film, alpha, pts, wo, prefs[key], **kw))
+                out[name].append(delta_e2000(got * e, ref * e))
+    rows = []
+    for name, des in out.items():
+        de = np.concatenate(des)
+        rows.append({"name": name, "dE_mean": float(de.mean()),
+                     "dE_p95": float(np.percentile(de, 95))})
+        if verbose:
+            print(f"  {name:72s} ΔE mean {de.mean():6.2f}  p95 {np.percentile(de, 95):6.2f}")
+    return rows
+
+
+def markdown(result) -> str:
+    lines = [f"Device: {result['device']}. Frame {result['frame']}, float32, CPU threads "
+             "as JAX configures them.", "",
+             "| method | s / frame | points / s | × ideal | compile s |", "|---|---|---|---|---|"]
+    for r in result["throughput"]:
+        lines.append(f"| {r['name']} | {r['warm_s']:.3g} | {r['points_per_s']:.3g} | "
+                     f"{r.get('vs_ideal', float('nan')):.2f} | {r['compile_s']:.2f} |")
+    lines += ["", "| real-time option (α ∈ {0.1, 0.35}, d = 600 nm, η₂ = 1.2, η₃ = 2.0, "
+              f"{result['option_maps']}) "
+              "| ΔE₀₀ mean | ΔE₀₀ p95 |", "|---|---|---|"]
+    for r in result["options"]:
+        lines.append(f"| {r['name']} | {r['dE_mean']:.2f} | {r['dE_p95']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def run_ibl_bench(out="figures", quick=False, verbose=True):
+    from pathlib import Path
+
+    w, h = (320, 180) if quick else (2560, 1440)
+    if verbose:
+        print(f"IBL throughput, {w}×{h} frame:")
+    thr = throughput(w, h, verbose=verbose)
+    if verbose:
+        print("IBL real-time options vs reference:")
+    maps = ("forest_slope",) if quick else tuple(SHIPPED)
+    opts = option_errors(resolution=16 if quick else 48, maps=maps, verbose=verbose)
+    result = {"device": f"{jax.devices()[0].device_kind} ({platform.processor() or 'cpu'})",
+              "frame": f"{w}×{h}", "throughput": thr, "options": opts,
+              "option_maps": ", ".join(maps)}
+    out = Path(out)
+    write_json(out / "ibl_bench.json", result)
+    atomic_write(out / "ibl_bench.md", lambda tmp: Path(tmp).write_text(markdown(result)))
+    return result
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", default="figures")
+    p.add_argument("--quick", action="store_true")
+    a = p.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)
+    run_ibl_bench(a.out, a.quick)
+
+
+if __name__ == "__main__":
+    main()

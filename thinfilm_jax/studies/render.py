@@ -1,0 +1,238 @@
+"""Sphere renders under environment maps (Kneiphof et al. 2019, Figures 3–6): `thinfilm-jax render`.
+
+Scenes (SPEC §9 and the issue's setups):
+* ``fig4`` — Figure 4: α = 0.25, d = 600 nm, η₂ = 1.2, η₃ = 2.0, κ₃ = 0, under every map;
+* ``fig3`` — Figure 3's roughness sweep: η₂ = 1.3, η₃ = 2.0 + 0.5i, d = 650 nm,
+  α ∈ `alphas`, under the first map;
+* ``varying`` — Figures 5/6-style spatially varying thickness: a smooth thickness field
+  d(n) ∈ [250, 850] nm (sum of sines over the normal) on the ``fig4`` material, every map.
+
+Camera: orthographic, looking horizontally-down (15°) at a unit sphere, its azimuth chosen
+so that the brightest texel of the map is reflected off-centre (deterministic). Behind the
+sphere the map itself is shown (linear RGB). Every method shades the same pixels: reference
+(texel-space quadrature, float64), ideal and filtered (prefiltered map, float64 here; the
+float32 frame timings are in the benchmark). Display: exposure × radiance, converted
+bands → XYZ → sRGB (colour-science), clipped; the exposure maps the reference's 99th
+luminance percentile to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled
+values against the reference (mirror white Y = 1), mean and p95 per panel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._io import atomic_write, write_json
+from ..colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
+from ..envmap import SHIPPED, load_envmap, lookup_bilinear, luminance_weights
+from ..film import Film
+from ..ibl import envmap_radiance
+from ..prefilter import prefilter_envmap
+
+SCENES = ("fig4", "fig3", "varying")
+METHODS = ("reference", "ideal", "filtered")
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    envmaps: tuple[str, ...] = tuple(SHIPPED)
+    scenes: tuple[str, ...] = SCENES
+    methods: tuple[str, ...] = METHODS
+    resolution: int = 64
+    alphas: tuple[float, ...] = (0.05, 0.15, 0.3, 0.6)  # fig3
+    exposure: float | None = None
+    observer: str = "stiles_burch_1959_10"
+    elevation_deg: float = 15.0
+
+
+def camera(view_azimuth: float, elevation_deg: float):
+    """(ω_o toward the eye, right, up) of the orthographic camera."""
+    el = np.deg2rad(elevation_deg)
+    wo = np.array([np.cos(el) * np.cos(view_azimuth), np.cos(el) * np.sin(view_azimuth),
+                   np.sin(el)])
+    right = np.cross(-wo, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    return wo, right, np.cross(right, -wo)
+
+
+def sphere(resolution: int, wo, right, up):
+    """Pixel mask (R, R) and unit normals (R, R, 3) of a unit sphere filling the frame."""
+    c = (np.arange(resolution) + 0.5) / resolution * 2 - 1
+    x, y = np.meshgrid(c, -c)
+    r2 = x * x + y * y
+    mask = r2 < 0.98
+    z = np.sqrt(np.clip(1 - r2, 0, 1))
+    n = x[..., None] * right + y[..., None] * up + z[..., None] * wo
+    return mask, n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def thickness_field(n):
+    """A smooth thickness texture on the sphere, d ∈ [250, 850] nm (soap-film-like swirls)."""
+    s = (np.sin(3.1 * n[..., 0] + 1.3 * n[..., 2] + 0.4) * np.cos(2.3 * n[..., 1] - 0.7)
+         + 0.5 * np.sin(5.0 * n[..., 2] + 2.0 * n[..., 0]))
+    return 550.0 + 200.0 * s  # |s| ≤ 1.5
+
+
+def scene_setups(cfg: RenderConfig):
+    """[(scene, label, envmap name, Film-maker(normals), α)]."""
+    fig4 = (1.2, 2.0, 0.0)
+    out = []
+    for scene in cfg.scenes:
+        if scene == "fig4":
+            out += [(scene, f"α=0.25, d=600 nm | {m}", m, lambda n: Film(600.0, *fig4), 0.25)
+                    for m in cfg.envmaps]
+        elif scene == "fig3":
+            out += [(scene, f"α={a:g} | {cfg.envmaps[0]}", cfg.envmaps[0],
+                     lambda n: Film(650.0, 1.3, 2.0, 0.5), a) for a in cfg.alphas]
+        elif scene == "varying":
+            out += [(scene, f"d(x) ∈ [250, 850] nm | {m}", m,
+                     lambda n: Film(thickness_field(n), *fig4), 0.25) for m in cfg.envmaps]
+        else:
+            raise ValueError(f"unknown scene {scene!r}; expected one of {SCENES}")
+    return out
+
+
+def _view_azimuth(env) -> float:
+    lum = np.asarray(env.radiance) @ luminance_weights()
+    _, j = np.unravel_index(np.argmax(lum), lum.shape)
+    phi_sun = (j + 0.5) / lum.shape[1] * 2 * np.pi
+    return float(phi_sun + np.deg2rad(150.0))  # the sun behind the camera, off to one side
+
+
+def render_one(setup, cfg: RenderConfig, cache: dict):
+    scene, label, name, make_film, alpha = setup
+    if name not in cache:
+        env = load_envmap(name)
+        cache[name] = (env, prefilter_envmap(env, observer=cfg.observer))
+    env, pref = cache[name]
+    wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)
+    mask, n = sphere(cfg.resolution, wo, right, up)
+    pts = n[mask]
+    film = make_film(pts)
+    out = {"label": label, "scene": scene, "envmap": name, "alpha": alpha, "mask": mask,
+           "times": {}, "values": {}}
+    for method in cfg.methods:
+        src = env if method in ("reference", "mc") else pref
+        t0 = time.perf_counter()
+        vals = np.asarray(envmap_radiance(film, alpha, pts, wo, src, method=method,
+                                          observer=cfg.observer))
+        out["times"][method] = time.perf_counter() - t0
+        out["values"][method] = vals
+    d = (np.arange(cfg.resolution) + 0.5) / cfg.resolution * 2 - 1
+    bx, by = np.meshgrid(d, -d)
+    bg_dir = -wo + 0.6 * (bx[..., None] * right + by[..., None] * up)
+    bg_dir /= np.linalg.norm(bg_dir, axis=-1, keepdims=True)
+    out["background"] = np.asarray(lookup_bilinear(env.radiance, bg_dir))
+    out["film_thickness"] = np.asarray(np.broadcast_to(film.thickness, mask[mask].shape))
+    return out
+
+
+def _exposure(r, cfg):
+    if cfg.exposure is not None:
+        return cfg.exposure
+    y = bands_to_xyz(r["values"]["reference" if "reference" in r["values"] else
+                              next(iter(r["values"]))], cfg.observer)[:, 1]
+    return float(0.9 / max(np.percentile(y, 99), 1e-12))
+
+
+def _image(r, vals, exposure, observer):
+    import colour
+
+    img = np.clip(colour.cctf_encoding(np.clip(r["background"] * exposure * 0.5, 0, 1)), 0, 1)
+    img[r["mask"]] = bands_to_srgb(vals * exposure, observer)
+    return img
+
+
+def summarise(results, cfg: RenderConfig) -> dict:
+    rows = []
+    for r in results:
+        e = _exposure(r, cfg)
+        row = {"label": r["label"], "scene": r["scene"], "envmap": r["envmap"],
+               "alpha": r["alpha"], "exposure": e, "points": int(r["mask"].sum()),
+               "seconds": r["times"], "dE2000": {}}
+        if "reference" in r["values"]:
+            for m in cfg.methods:
+                if m == "reference":
+                    continue
+                de = delta_e2000(r["values"][m] * e, r["values"]["reference"] * e, cfg.observer)
+                row["dE2000"][m] = {"mean": float(de.mean()), "p95": float(np.percentile(de, 95)),
+                                    "max": float(de.max())}
+        rows.append(row)
+    return {"config": dataclasses.asdict(cfg), "renders": rows}
+
+
+def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    others = [m for m in cfg.methods if m != "reference"]
+    ncol = len(cfg.methods) + (len(others) if "reference" in cfg.methods else 0)
+    fig, axes = plt.subplots(len(results), ncol, figsize=(2.3 * ncol, 2.4 * len(results) + 0.6),
+                             squeeze=False)
+    im = None
+    for i, r in enumerate(results):
+        e = _exposure(r, cfg)
+        for j, m in enumerate(cfg.methods):
+            ax = axes[i, j]
+            ax.imshow(_image(r, r["values"][m], e, cfg.observer))
+            pts = r["mask"].sum() / r["times"][m]
+            ax.set_title(f"{m}\n{pts:,.0f} pts/s", fontsize=8)
+            if j == 0:
+                ax.set_ylabel(r["label"].replace(" | ", "\n"), fontsize=7)
+        for j, m in enumerate(others if "reference" in cfg.methods else []):
+            ax = axes[i, len(cfg.methods) + j]
+            de = np.full(r["mask"].shape, np.nan)
+            de[r["mask"]] = delta_e2000(r["values"][m] * e, r["values"]["reference"] * e,
+                                        cfg.observer)
+            im = ax.imshow(de, cmap="magma", vmin=0, vmax=20)
+            ax.set_title(f"ΔE₀₀ {m}\nmean {np.nanmean(de):.2f}, "
+                         f"p95 {np.nanpercentile(de, 95):.2f}", fontsize=8)
+        for ax in axes[i]:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    if im is not None:
+        fig.colorbar(im, ax=axes, shrink=0.6, label="CIEDE2000 ΔE vs reference")
+    fig.suptitle(title, fontsize=9)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    plt.close(fig)
+
+
+TITLES = {
+    "fig4": "Figure 4 setup: η₂ = 1.2 on η₃ = 2.0 (κ₃ = 0), d = 600 nm, GGX α = 0.25; "
+            "Stiles & Burch bands, M = 2, LUT Ŝ, cross-band R_jk; exposure per row",
+    "fig3": "Figure 3 roughness sweep: η₂ = 1.3 on η₃ = 2.0 + 0.5i, d = 650 nm; exposure per row",
+    "varying": "Spatially varying thickness d ∈ [250, 850] nm (Figures 5/6 style), η₂ = 1.2 "
+               "on η₃ = 2.0, α = 0.25; exposure per row",
+}
+
+
+def run_render(cfg: RenderConfig = RenderConfig(), out_dir="figures", progress: bool = True):
+    """Render every scene, write ibl_<scene>.png, ibl_render.npz and ibl_render.json."""
+    from pathlib import Path
+
+    from tqdm.auto import tqdm
+
+    out = Path(out_dir)
+    setups = scene_setups(cfg)
+    cache: dict = {}
+    results = []
+    for s in tqdm(setups, desc="render", disable=not progress):
+        results.append(render_one(s, cfg, cache))
+    for scene in cfg.scenes:
+        rs = [r for r in results if r["scene"] == scene]
+        plot_scene(rs, cfg, out / f"ibl_{scene}.png", TITLES[scene])
+    summary = summarise(results, cfg)
+    arrays = {}
+    for i, r in enumerate(results):
+        arrays[f"r{i}_mask"] = r["mask"]
+        for m, v in r["values"].items():
+            arrays[f"r{i}_{m}"] = v
+    atomic_write(out / "ibl_render.npz", lambda tmp: np.savez_compressed(tmp, **arrays),
+                 suffix=".npz")
+    write_json(out / "ibl_render.json", summary)
+    return summary

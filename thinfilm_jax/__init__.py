@@ -13,12 +13,18 @@ The public face is this file; modules hold one concept each:
 `thinfilm_jax.studies`, which nothing here imports.
 """
 
+from . import kernels as kernels
 from ._validate import checked as checked
 from .airy import airy_reflectance as airy_reflectance
+from .envmap import SHIPPED as SHIPPED_ENVMAPS
+from .envmap import EnvMap as EnvMap
+from .envmap import load_envmap as load_envmap
 from .film import Film as Film
 from .fit import FitResult as FitResult
 from .fit import fit_film as fit_film
 from .fit import fit_spectrum as fit_spectrum
+from .ibl import METHODS as ENVMAP_METHODS
+from .ibl import envmap_radiance as envmap_radiance
 from .lut import ShatLUT as ShatLUT
 from .lut import build_shat_lut as build_shat_lut
 from .microfacet import albedo as albedo
@@ -27,6 +33,8 @@ from .opd import taylor_opd_moments as taylor_opd_moments
 from .patch import METHODS as PATCH_METHODS
 from .patch import patch_radiance as patch_radiance
 from .patch import patch_radiance_mc as patch_radiance_mc
+from .prefilter import PrefilteredEnvMap as PrefilteredEnvMap
+from .prefilter import prefilter_envmap as prefilter_envmap
 from .reflectance import rgb_reflectance as rgb_reflectance
 from .series import SeriesTerms as SeriesTerms
 from .series import series_terms as series_terms

@@ -32,9 +32,9 @@ from .film import Film
 from .filtered import SHAT_SOURCES, filtered_bands
 from .lut import ShatLUT, build_shat_lut
 from .microfacet import light_moments, patch_quadrature, sample_patch_mc, splitsum_light_moments
-from .opd import (cos_incidence_from_projection, opd_moments_exact, project_light_moments,
-                  taylor_opd_moments)
-from .reflectance import fourier_bands, spectral_bands
+from .kernels import filtered_kernel, ideal_kernel
+from .opd import cos_incidence_from_projection, opd_moments_exact, project_light_moments
+from .reflectance import spectral_bands
 from .spectra import DEFAULT_OBSERVER, OBSERVERS
 
 METHODS = ("reference", "ideal", "filtered_gt_moments", "filtered_gt_opd", "filtered")
@@ -121,21 +121,20 @@ def patch_one(film: Film, theta_o, alpha, *, method, observer, terms=2, shat="ex
         return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
     albedo = jnp.sum(quad.weight)
     if method == "ideal":
-        return albedo * fourier_bands(film, jnp.cos(theta_o), observer, terms=terms,
-                                      shat="tabulated", base=base)
+        return albedo * ideal_kernel(film, jnp.cos(theta_o), observer=observer, terms=terms,
+                                     shat="exact", base=base)
     if method == "filtered":
         mean, cov = splitsum_light_moments(theta_o, alpha, n_u=n_u, n_phi=n_phi, kind=ndf)
     else:
         mean, cov = light_moments(quad)
     wo = jnp.stack([jnp.sin(theta_o), jnp.zeros_like(theta_o), jnp.cos(theta_o)])
-    mu_c, var_c = project_light_moments(wo, mean, cov)
     if method == "filtered_gt_opd":
+        mu_c, _ = project_light_moments(wo, mean, cov)
         opd = opd_moments_exact(film, quad.cos_hi, quad.weight)
-    else:
-        opd = taylor_opd_moments(film, mu_c, var_c)
-    cos_star = cos_incidence_from_projection(mu_c)
-    return albedo * filtered_bands(film, cos_star, opd, observer, terms=terms, shat=shat,
-                                   lut=lut, base=base)
+        return albedo * filtered_bands(film, cos_incidence_from_projection(mu_c), opd, observer,
+                                       terms=terms, shat=shat, lut=lut, base=base)
+    return albedo * filtered_kernel(film, wo, mean, cov, observer=observer, terms=terms,
+                                    shat=shat, lut=lut, base=base)
 
 
 def patch_radiance_mc(film: Film, theta_o: float, alpha: float, key, *, n_samples: int = 100_000,

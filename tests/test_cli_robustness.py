@@ -66,6 +66,22 @@ def test_figure7_bad_arguments_fail_before_computing(argv, words, no_figure, cap
     assert "thinfilm-jax figure7: error:" in err
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--resolution", "0"], "--resolution: must be an integer in [1, inf)"),
+    (["--exposure", "-1"], "--exposure"),
+])
+def test_render_bad_arguments_fail_before_computing(argv, words, monkeypatch, capsys):
+    def boom(*a, **k):
+        raise AssertionError("render computed although the arguments were bad")
+
+    monkeypatch.setattr("thinfilm_jax.cli._render", boom)
+    with pytest.raises(SystemExit) as e:
+        main(["render", *argv])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert words in err and "thinfilm-jax render: error:" in err
+
+
 def test_figure7_out_must_be_a_folder(tmp_path, no_figure, capsys):
     f = tmp_path / "a_file"
     f.write_text("x")

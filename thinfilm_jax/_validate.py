@@ -52,9 +52,11 @@ class checked(contextlib.ContextDecorator):
 
     (the error is raised when the result is computed; its message names the argument).
 
-    As a context, ``with tf.checked(): ...`` checks what is *traced* inside the block: a
-    jitted function traced (first called) outside the block stays unchecked when called
-    inside it (JAX reuses the compiled trace). Concrete inputs are always checked.
+    Wrap the function before jitting it: ``checked(jax.jit(f))`` would reuse an unchecked
+    trace of ``jax.jit(f)``. As a context, ``with tf.checked(): ...`` checks what is *traced*
+    inside the block: a jitted function traced (first called) outside the block stays
+    unchecked when called inside it (JAX reuses the compiled trace). Concrete inputs are
+    always checked.
     """
 
     def __enter__(self):

@@ -293,3 +293,36 @@ def test_gradients_finite(method, dtype):
             dn[k] -= h
             fd = (loss(*up) - loss(*dn)) / (2 * h)
             np.testing.assert_allclose(g[k], fd, rtol=1e-5, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- float32 on GPU
+@pytest.mark.parametrize("method", ["reference", "mc", "ideal", "filtered"])
+def test_contractions_state_their_precision(method):
+    """No dot_general of the IBL paths may fall back to the backend default (TF32 on GPUs)."""
+    from _precision import assert_contractions_precise, count_contractions
+
+    env = load_envmap(np.ones((8, 16, 3)))
+    src = prefilter_envmap(env) if method in ("ideal", "filtered") else env
+    if method in ("ideal", "filtered"):
+        src = jax.tree.map(lambda x: x.astype(jnp.complex64 if jnp.iscomplexobj(x)
+                                              else jnp.float32), src)
+    f32 = FILM.astype(jnp.float32)
+    v = view_at(np.array([0.2, 1.0])).astype(np.float32)
+
+    def fn(thickness, alpha):
+        return envmap_radiance(f32._replace(thickness=thickness), alpha, Z.astype(np.float32),
+                               v, src, method=method, subdivisions=1, n_samples=4)
+
+    args = (jnp.float32(500.0), jnp.float32(0.3))
+    assert count_contractions(fn, *args) >= 1
+    assert_contractions_precise(fn, *args)
+    if method == "filtered":  # the prefilter's own contractions too (one level)
+        from thinfilm_jax.prefilter import _filter_level
+
+        d = jnp.asarray(texel_centers(8, 16).reshape(-1, 3), jnp.float32)
+        om = jnp.asarray(texel_solid_angles(8, 16).reshape(-1), jnp.float32)
+        for per_channel in (False, True):
+            assert_contractions_precise(
+                lambda r: _filter_level(jnp.float32(0.3), r, d, om, d.reshape(8, 16, 3),
+                                        jnp.ones(3, jnp.float32), per_channel),
+                jnp.ones((128, 3), jnp.float32))

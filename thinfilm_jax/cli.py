@@ -31,9 +31,14 @@ def _figure7(args) -> int:
 
 def _bench(args) -> int:
     _enable_x64()
-    from .studies.bench import run_bench
+    if args.suite in ("core", "all"):
+        from .studies.bench import run_bench
 
-    run_bench(out=args.out, quick=args.quick)
+        run_bench(out=args.out, quick=args.quick)
+    if args.suite in ("ibl", "all"):
+        from .studies.ibl_bench import run_ibl_bench
+
+        run_ibl_bench(out=args.out, quick=args.quick)
     return 0
 
 
@@ -99,6 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "run time) and measure its error; print a table, write JSON.")
     b.add_argument("--out", default="figures", help="output folder (default: figures)")
     b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
+    b.add_argument("--suite", choices=["core", "ibl", "all"], default="core",
+                   help="core: error vs run time, peers, specialisation (default); ibl: the "
+                        "2560×1440 IBL frame and the real-time options' errors; all: both")
     b.set_defaults(func=_bench)
 
     from .envmap import SHIPPED

@@ -34,7 +34,7 @@ from jax import Array
 
 from . import _validate as V
 from .airy import choose_base
-from .envmap import EnvMap, load_envmap, lookup_nearest, texel_solid_angles
+from .envmap import EnvMap, _row_geometry, load_envmap, lookup_nearest
 from .film import Film
 from .filtered import SHAT_SOURCES
 from .kernels import filtered_kernel, ideal_kernel
@@ -43,7 +43,7 @@ from .microfacet import ndf, smith_g1, smith_g2
 from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered,
                         moments_to_mean_cov, prefilter_envmap)
 from .reflectance import spectral_bands
-from .spectra import DEFAULT_OBSERVER, OBSERVERS
+from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .uplift import cross_band_name
 
 METHODS = ("reference", "mc", "ideal", "filtered")
@@ -111,7 +111,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     args = [jnp.broadcast_to(jnp.asarray(x, dtype), shape) for x in (*film, alpha)]
     nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
     if realtime:
-        if shat == "lut" and pref.lut.table.shape[-1] != 3 * len(_bands(observer)):
+        if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
             raise ValueError("the PrefilteredEnvMap was built for another observer")
         cfg = (method, observer, terms, shat, bool(cross_band), base)
         return _realtime_jit(Film(*args[:5]), args[5], *nv, pref, cfg,
@@ -141,10 +141,6 @@ def auto_subdivisions(height: int, alpha) -> int:
     """s = ⌈8 (π/H) / α_min⌉ in [2, 16]: sub-cells an eighth of the narrowest lobe."""
     a = float(np.min(np.asarray(alpha))) if V.is_concrete(alpha) else 0.05
     return int(np.clip(np.ceil(8 * np.pi / height / a), 2, 16))
-
-
-def _bands(observer):
-    return ("R", "G", "B") if observer == "stiles_burch_1959_10" else ("X", "Y", "Z")
 
 
 def _batch(batch_size, n_pts, per_point):
@@ -217,7 +213,7 @@ def texel_nodes(h: int, w: int, s: int):
     the flat texel index of each node. Host float64."""
     x, wt = np.polynomial.legendre.leggauss(s)
     x, wt = (x + 1) / 2, wt / 2
-    ct = np.cos(np.arange(h + 1) * np.pi / h)
+    ct, _ = _row_geometry(h, w)
     u = ct[:-1, None] + (ct[1:] - ct[:-1])[:, None] * x[None]  # (h, s) cos θ nodes
     wu = (ct[:-1] - ct[1:])[:, None] * wt[None]
     phi = (np.arange(w)[:, None] + x[None]) * 2 * np.pi / w  # (w, s)
@@ -321,9 +317,9 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
             u = jax.random.uniform(k, (s, 2), dtype)
             t, b = _local_frame(n)
             frame = jnp.stack([t, b, n])  # rows: local axes in world
-            wo_l = frame @ wo
+            wo_l = jnp.matmul(frame, wo, precision=HIGHEST)
             m_l = _vndf_sample(u[:, 0], u[:, 1], wo_l, a)
-            m = m_l @ frame
+            m = jnp.matmul(m_l, frame, precision=HIGHEST)
             wi = 2 * jnp.sum(m * wo, -1, keepdims=True) * m - wo
             ci, co = jnp.sum(wi * n, -1), jnp.sum(wo * n, -1)
             ok = (ci > 0) & (co > 0)

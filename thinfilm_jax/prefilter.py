@@ -81,7 +81,7 @@ def _features(d):
 def _filter_level(alpha, rad, dirs, omega, out_dirs, lum, per_channel):
     """One level: (P (M, 3), moments (M, 9) or (M, 3, 9)) for output directions (M, 3)."""
     feats = _features(dirs)  # (N, 9)
-    y = rad @ lum if not per_channel else rad  # (N,) or (N, 3)
+    y = jnp.matmul(rad, lum, precision=HIGHEST) if not per_channel else rad  # (N,) or (N, 3)
     ones = jnp.ones_like(omega)
 
     def row(r):  # r: (w, 3) one output row

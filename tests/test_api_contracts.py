@@ -44,21 +44,14 @@ def test_check_grads_k29_lut():
 N = 4
 FILMS = tf.Film(np.linspace(0.0, 900.0, N), np.full(N, 1.3), np.full(N, 2.0), np.full(N, 0.5))
 COS = np.linspace(0.2, 1.0, N)
-# airy.polarised_reflectance broadcasts (…, 1) against (K,) wavelengths (airy.py, the Airy
-# owner's module): every path through the spectral Airy sum fails until that is fixed there
-AIRY_RANK = pytest.mark.xfail(raises=ValueError, strict=True,
-                              reason="implicit rank promotion in airy.polarised_reflectance")
 CALLS = {
-    "airy_reflectance": pytest.param(lambda: tf.airy_reflectance(FILMS, COS, np.full(N, 550.0)),
-                                     marks=AIRY_RANK),
-    "rgb_reflectance[spectral]": pytest.param(lambda: tf.rgb_reflectance(FILMS, COS),
-                                              marks=AIRY_RANK),
+    "airy_reflectance": lambda: tf.airy_reflectance(FILMS, COS, np.full(N, 550.0)),
+    "rgb_reflectance[spectral]": lambda: tf.rgb_reflectance(FILMS, COS),
     "rgb_reflectance[fourier]": lambda: tf.rgb_reflectance(FILMS, COS, method="fourier"),
     "rgb_reflectance[fourier,gaussian]": lambda: tf.rgb_reflectance(FILMS, COS, method="fourier",
                                                                     shat="gaussian"),
-    "patch_radiance[reference]": pytest.param(
-        lambda: tf.patch_radiance(FILMS, np.full(N, 0.5), np.full(N, 0.2), quadrature=QUAD),
-        marks=AIRY_RANK),
+    "patch_radiance[reference]": lambda: tf.patch_radiance(FILMS, np.full(N, 0.5),
+                                                           np.full(N, 0.2), quadrature=QUAD),
     **{f"patch_radiance[{m},{s}]": (lambda m=m, s=s: tf.patch_radiance(
         FILMS, np.full(N, 0.5), np.full(N, 0.2), method=m, shat=s, quadrature=QUAD))
        for m, s in (("ideal", "exact"), ("filtered", "exact"), ("filtered_gt_moments", "lut"),

@@ -13,10 +13,7 @@ SKIP = {"thinfilm_jax.__main__"}
 MODULES = sorted(m.name for m in pkgutil.walk_packages(thinfilm_jax.__path__, "thinfilm_jax.")
                  if m.name not in SKIP)
 # known failures, each reported to the module's owner (remove the entry with the fix)
-KNOWN = {
-    "thinfilm_jax.airy": "airy_reflectance's example prints 0.04000000000000001 (float "
-                         "rounding of ((1 − 1.5)/(1 + 1.5))²), not 0.04",
-}
+KNOWN: dict[str, str] = {}
 
 
 @pytest.mark.parametrize("name", MODULES)

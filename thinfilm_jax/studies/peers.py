@@ -113,6 +113,12 @@ def bench_peers(cfg: BenchConfig, verbose: bool = True) -> dict:
             cf, lf = (x.ravel() for x in np.meshgrid(np.cos(th), lam, indexing="ij"))
             _, t_val_flat = time_call(value, (film, cf, lf), cfg.repeats)
             t_np_flat = time_host(lambda: numpy_airy(eta1, eta2, n3, d, cf, lf), cfg.repeats)
+            # the float32 option of the same call (the real-time dtype)
+            f32 = film.astype(jnp.float32)
+            _, t_val32 = time_call(value, (f32, c.astype(np.float32),
+                                           lam[None, :].astype(np.float32)), cfg.repeats)
+            _, t_val32_flat = time_call(value, (f32, cf.astype(np.float32),
+                                                lf.astype(np.float32)), cfg.repeats)
             col = colour_unpolarised(eta1, eta2, n3, d, th, lam)
             t_col = time_host(lambda: colour_unpolarised(eta1, eta2, n3, d, th, lam),
                               cfg.repeats)
@@ -130,6 +136,8 @@ def bench_peers(cfg: BenchConfig, verbose: bool = True) -> dict:
                    "numpy_closed_form": t_np.warm_s / n_eval,
                    "airy_value_flat": t_val_flat.warm_s / n_eval,
                    "numpy_closed_form_flat": t_np_flat.warm_s / n_eval,
+                   "airy_value_f32": t_val32.warm_s / n_eval,
+                   "airy_value_flat_f32": t_val32_flat.warm_s / n_eval,
                    "colour_thin_film_tmm": t_col.warm_s / n_eval, "tmm_coh_tmm": t_tmm / k}
             col_bad = ~np.isfinite(col)
             out["grids"][key] = {
@@ -141,7 +149,10 @@ def bench_peers(cfg: BenchConfig, verbose: bool = True) -> dict:
                     **{name: per[name] / per["airy_value"]
                        for name in ("numpy_closed_form", "colour_thin_film_tmm", "tmm_coh_tmm")},
                     "numpy_closed_form_flat": per["numpy_closed_form_flat"]
-                    / per["airy_value_flat"]},
+                    / per["airy_value_flat"],
+                    "numpy_closed_form_vs_f32": per["numpy_closed_form"] / per["airy_value_f32"],
+                    "numpy_closed_form_flat_vs_f32": per["numpy_closed_form_flat"]
+                    / per["airy_value_flat_f32"]},
                 "grad_over_value_cost": per["airy_value_and_grad"] / per["airy_value"],
                 "max_abs_diff": {
                     "airy_vs_tmm": float(np.abs(ours[ia, iw] - ref).max()),
@@ -171,3 +182,31 @@ def peers_table(peers) -> str:
             f"| {p['numpy_closed_form_flat'] * 1e6:.3g} | {s['numpy_closed_form_flat']:.3g} "
             f"| {m['airy_vs_tmm']:.2g} | {m['colour_vs_tmm']:.2g} |")
     return "\n".join(lines)
+
+
+def main(argv=None) -> None:
+    """``python -m thinfilm_jax.studies.peers``: the peers on the 10³ × 10³ grid only (≈ 1 min),
+    with the float32 option and the memory roofline of this machine."""
+    import argparse
+
+    p = argparse.ArgumentParser(description=main.__doc__)
+    p.add_argument("--side", type=int, default=1000)
+    a = p.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)
+    out = bench_peers(BenchConfig(peer_sides=(a.side,), tmm_calls=50), verbose=False)
+    buf = np.random.default_rng(0).random(10**7)
+    t = time_host(lambda: buf.copy(), 5).warm_s
+    bandwidth = 2 * buf.nbytes / t
+    print(peers_table(out))
+    print(f"copy bandwidth {bandwidth / 1e9:.1f} GB/s: a flat pair reads cos θ, λ and writes R "
+          f"(24 B in float64) -> memory floor {24 / bandwidth * 1e9:.2f} ns/pair")
+    for key, g in out["grids"].items():
+        p, s = g["s_per_eval"], g["speedup_airy_vs"]
+        print(f"{key}: float64 {s['numpy_closed_form']:.2f}x (grid) / "
+              f"{s['numpy_closed_form_flat']:.2f}x (flat); float32 "
+              f"{s['numpy_closed_form_vs_f32']:.2f}x / {s['numpy_closed_form_flat_vs_f32']:.2f}x "
+              f"NumPy float64; flat float64 {p['airy_value_flat'] * 1e9:.0f} ns/pair")
+
+
+if __name__ == "__main__":
+    main()

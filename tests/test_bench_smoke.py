@@ -21,7 +21,7 @@ def test_bench_tiny(tmp_path, capsys):
         assert r["dE_max"] is not None and r["dE_max"] >= 0, r
     # the reference itself has zero error; the M sweep agrees with rgb_reflectance
     assert data["rows"][0]["path"] == "spectral (reference)" and data["rows"][0]["dE_max"] == 0
-    assert data["m_selection"]["tabulated"]["max_diff_vs_rgb_reflectance"] < 1e-12
+    assert data["m_selection"]["exact"]["max_diff_vs_rgb_reflectance"] < 1e-12
     # the per-point kernels reproduce the patch methods they stand for
     rc = data["reference_check"]
     assert rc["kernel_ideal_vs_patch_ideal_max_abs"] < 1e-5

@@ -60,16 +60,16 @@ def test_shat_matches_direct_sum_over_colour_table(observer):
     np.testing.assert_allclose(sensitivity_ft(x, observer), want, rtol=0, atol=1e-13)
 
 
-@pytest.mark.parametrize("method", ["tabulated", "gaussian"])
+@pytest.mark.parametrize("method", ["exact", "gaussian"])
 def test_filtered_shat_with_zero_variance_is_unfiltered(method):
     x = np.linspace(0.0, 12000.0, 101)
-    a = np.asarray(sensitivity_ft(x, sigma2=np.zeros_like(x), method=method))
-    b = np.asarray(sensitivity_ft(x, method=method))
+    a = np.asarray(sensitivity_ft(x, sigma2=np.zeros_like(x), shat=method))
+    b = np.asarray(sensitivity_ft(x, shat=method))
     assert np.array_equal(a, b)  # exact: e^{0} = 1
 
 
 @pytest.mark.parametrize("observer", OBSERVER_NAMES)
-@pytest.mark.parametrize("method", ["tabulated", "gaussian"])
+@pytest.mark.parametrize("method", ["exact", "gaussian"])
 def test_filtered_shat_equals_gauss_hermite_average(observer, method):
     """K 18 / SPEC §5: Ŝ(μ, σ²) = E[Ŝ(x)], x ~ N(μ, σ²). For method="gaussian" this checks
     the closed-form filter of the Gaussian mixture against its own unfiltered transform."""
@@ -77,11 +77,11 @@ def test_filtered_shat_equals_gauss_hermite_average(observer, method):
     n = 60
     mu = np.concatenate([rng.uniform(-20000.0, 20000.0, n - 4), [0.0, 0.0, 500.0, 3000.0]])
     sigma = np.concatenate([rng.uniform(0.0, 300.0, n - 4), [300.0, 0.0, 300.0, 150.0]])
-    want = gauss_hermite_mean(lambda x: sensitivity_ft(x, observer, method=method), mu, sigma)
-    got = np.asarray(sensitivity_ft(mu, observer, sigma2=sigma**2, method=method))
+    want = gauss_hermite_mean(lambda x: sensitivity_ft(x, observer, shat=method), mu, sigma)
+    got = np.asarray(sensitivity_ft(mu, observer, sigma2=sigma**2, shat=method))
     np.testing.assert_allclose(got, want, rtol=0, atol=FILTER_ATOL)
     # filtering changes Ŝ (the check is not vacuous)
-    assert np.abs(got - np.asarray(sensitivity_ft(mu, observer, method=method))).max() > 0.05
+    assert np.abs(got - np.asarray(sensitivity_ft(mu, observer, shat=method))).max() > 0.05
 
 
 @pytest.mark.parametrize("observer", OBSERVER_NAMES)
@@ -93,7 +93,7 @@ def test_gaussian_fit_error_bound(observer):
     assert np.all(err <= GAUSS_FIT_MAX)
     # independent re-evaluation of the same quantity on other x samples
     x = np.random.default_rng(52).uniform(0.0, 8000.0, 500)
-    diff = np.abs(np.asarray(sensitivity_ft(x, observer, method="gaussian"))
+    diff = np.abs(np.asarray(sensitivity_ft(x, observer, shat="gaussian"))
                   - np.asarray(sensitivity_ft(x, observer)))
     assert np.all(diff.max(axis=0) <= err + 1e-3)
     assert diff.max() > 1e-4  # it is an approximation, not the table itself

@@ -83,8 +83,8 @@ def test_bad_options_elsewhere():
         tf.get_observer("nope")
     with pytest.raises(ValueError, match="observer"):
         tf.sensitivity_ft(0.0, "nope")
-    with pytest.raises(ValueError, match="method"):
-        tf.sensitivity_ft(0.0, method="nope")
+    with pytest.raises(ValueError, match="shat"):
+        tf.sensitivity_ft(0.0, shat="nope")
 
 
 def test_incompatible_shapes():

@@ -33,9 +33,7 @@ def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, term
         def shat_m(m):
             return lookup(lut, -m * mean, m * std)
     else:
-        method = "gaussian" if shat == "gaussian" else "tabulated"
-
         def shat_m(m):
-            return sensitivity_ft(-m * mean, observer, sigma2=(m * std) ** 2, method=method)
-    s0 = shat_at_zero(observer, dtype, "gaussian" if shat == "gaussian" else "tabulated")
+            return sensitivity_ft(-m * mean, observer, sigma2=(m * std) ** 2, shat=shat)
+    s0 = shat_at_zero(observer, dtype, "gaussian" if shat == "gaussian" else "exact")
     return jnp.mean(fourier_band_reflectance(st, shat_m, terms, s0), axis=0)

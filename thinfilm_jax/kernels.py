@@ -58,8 +58,7 @@ def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2
         opd = OPDMoments(opd_of_cos(film, cos_o), jnp.zeros_like(jnp.asarray(cos_o)))
         return filtered_bands(film, cos_o, opd, observer, terms=terms, shat="lut", lut=lut,
                               base=base)
-    return fourier_bands(film, cos_o, observer, terms=terms,
-                         shat="gaussian" if shat == "gaussian" else "tabulated", base=base)
+    return fourier_bands(film, cos_o, observer, terms=terms, shat=shat, base=base)
 
 
 def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, terms: int = 2,

@@ -25,7 +25,7 @@ METHODS = ("spectral", "fourier")
 
 
 def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
-                    method: str = "spectral", terms: int = 2, shat: str = "tabulated",
+                    method: str = "spectral", terms: int = 2, shat: str = "exact",
                     base: str = "auto") -> Array:
     """Band reflectances R_j of `film` at cos θ₁, shape broadcast(film, cos_theta) + (n_bands,).
 
@@ -35,7 +35,7 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
         observer: "stiles_burch_1959_10" (RGB, default) or "cie_1931_2" (XYZ).
         method: "spectral" (exact quadrature of Airy over λ) or "fourier" (K 4, M = terms).
         terms: M ≥ 0, number of Fourier orders (method="fourier" only).
-        shat: "tabulated" | "gaussian" source of Ŝ for method="fourier".
+        shat: "exact" | "gaussian" source of Ŝ for method="fourier".
         base: "auto" | "dielectric" | "general" arithmetic path (see `airy.choose_base`).
 
     Example:
@@ -74,7 +74,7 @@ def spectral_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, base="ge
 
 
 def fourier_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, terms=2,
-                  shat="tabulated", base="general", partial_sums: bool = False):
+                  shat="exact", base="general", partial_sums: bool = False):
     """BB17 Fourier-domain band reflectance (K 4), M = `terms` (broadcast inputs).
 
     With ``partial_sums=True``, every M' = 0 … `terms` at once, stacked on a leading axis
@@ -84,6 +84,6 @@ def fourier_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, terms=2,
     dtype = jnp.result_type(cos_theta, float)
     s0 = shat_at_zero(observer, dtype, shat)
     per_pol = fourier_band_reflectance(
-        st, lambda m: sensitivity_ft(-m * st.opd, observer, method=shat), terms, s0,
+        st, lambda m: sensitivity_ft(-m * st.opd, observer, shat=shat), terms, s0,
         partial_sums=partial_sums)
     return jnp.mean(per_pol, axis=1 if partial_sums else 0)

@@ -16,7 +16,7 @@ $$ \hat S_j(x) = \sum_k W_{kj} e^{-2\pi i x/\lambda_k}, \qquad
 
 A cheaper closed form (BB17's Gaussian fit) represents each band as a sum of Gaussians in
 frequency ν = 1/λ; its Fourier transform and filtered transform are then analytic
-(`gaussian_fit`, `sensitivity_ft(..., method="gaussian")`). Its error against the
+(`gaussian_fit`, `sensitivity_ft(..., shat="gaussian")`). Its error against the
 tabulated Ŝ is measured by `gaussian_fit_error` and stated in the README.
 """
 
@@ -37,7 +37,7 @@ OBSERVERS = {
     "cie_1931_2": "CIE 1931 2 Degree Standard Observer",
 }
 DEFAULT_OBSERVER = "stiles_burch_1959_10"
-SHAT_METHODS = ("tabulated", "gaussian")
+SHAT_METHODS = ("exact", "gaussian")
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,20 +103,20 @@ def _observer(observer) -> Observer:
     return observer if isinstance(observer, Observer) else get_observer(observer)
 
 
-def sensitivity_ft(x, observer=DEFAULT_OBSERVER, *, sigma2=None, method: str = "tabulated"):
+def sensitivity_ft(x, observer=DEFAULT_OBSERVER, *, sigma2=None, shat: str = "exact"):
     """Ŝ_j(x) (SPEC §4), or the Gaussian-filtered Ŝ_j(x, σ²) (SPEC §5) if `sigma2` is given.
 
     Args:
         x: optical path (nm), any shape.
         observer: observer name or `Observer`.
         sigma2: variance σ² (nm²) of a Gaussian on x, broadcasting with x; None means 0.
-        method: "tabulated" (exact quadrature on the observer's samples) or "gaussian"
+        shat: "exact" (quadrature on the observer's samples) or "gaussian"
             (closed form of the Gaussian fit, `gaussian_fit`).
 
     Returns:
         complex array of shape broadcast(x, sigma2) + (n_bands,).
     """
-    V.check_choice("method", method, SHAT_METHODS)
+    V.check_choice("shat", shat, SHAT_METHODS)
     obs = _observer(observer)
     if V.is_concrete(x):  # traced values (internal calls under jit) are not checked
         x = V.check_finite("x", x)
@@ -124,7 +124,7 @@ def sensitivity_ft(x, observer=DEFAULT_OBSERVER, *, sigma2=None, method: str = "
         sigma2 = V.check_range("sigma2", sigma2, 0.0, why=" (variance, nm²)")
     x = jnp.asarray(x)
     dtype = jnp.result_type(x, float)
-    if method == "gaussian":
+    if shat == "gaussian":
         return _gaussian_ft(x, sigma2, jnp.asarray(gaussian_fit(obs.name), dtype))
     # built from real parts (no implicit real → complex promotion)
     return jax.lax.complex(*_shat_quadrature(jnp, x, sigma2, obs, dtype))
@@ -164,16 +164,16 @@ def _shat_quadrature(xp, x, sigma2, obs: Observer, dtype):
     return jnp.matmul(re, w, precision=hi), jnp.matmul(im, w, precision=hi)
 
 
-def shat_at_zero(observer=DEFAULT_OBSERVER, dtype=jnp.float64, method: str = "tabulated") -> Array:
+def shat_at_zero(observer=DEFAULT_OBSERVER, dtype=jnp.float64, shat: str = "exact") -> Array:
     """Ŝ_j(0) of the C₀ term, shape (n_bands,).
 
-    "tabulated": Σ_k W_kj (= 1 up to rounding), which keeps SPEC §4's identity exact on the
+    "exact": Σ_k W_kj (= 1 up to rounding), which keeps SPEC §4's identity exact on the
     shared samples. "gaussian": the exact area of each band, 1 for the unit-area bands (the
     fit's own Ŝ(0) is only approximately right; C₀ must not inherit that fitting error) and
     ∫ S_j B_k dλ for the cross bands of `uplift`.
     """
     obs = _observer(observer)
-    if method == "gaussian" and obs.areas.shape[0] == obs.n_bands:
+    if shat == "gaussian" and obs.areas.shape[0] == obs.n_bands:
         return jnp.ones(obs.n_bands, dtype)
     return jnp.asarray(obs.weights.sum(axis=0), dtype)
 
@@ -261,5 +261,5 @@ def gaussian_fit_error(observer: str = DEFAULT_OBSERVER, x_max: float = 8000.0) 
     """max_x |Ŝ_fit(x) − Ŝ_tab(x)| over x ∈ [0, x_max] nm, per band (shape (J,))."""
     xs = np.linspace(0.0, x_max, 4001)
     tab = np.asarray(sensitivity_ft(xs, observer))
-    fit = np.asarray(sensitivity_ft(xs, observer, method="gaussian"))
+    fit = np.asarray(sensitivity_ft(xs, observer, shat="gaussian"))
     return np.abs(fit - tab).max(axis=0)

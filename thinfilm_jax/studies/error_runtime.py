@@ -127,7 +127,7 @@ def _shading_extras(cfg, run, rgb, film, c, film32, c32, names, ref, m32):
     run(rgb(method="spectral", base="general"), (film32, c32), "spectral f32", "float32",
         {"lambda_step": 1}, np.float32, ref)
     run(rgb(method="fourier", terms=m32, base="general"), (film32, c32), f"Fourier M={m32} f32",
-        "float32", {"terms": m32, "shat": "tabulated"}, np.float32, ref)
+        "float32", {"terms": m32, "shat": "exact"}, np.float32, ref)
     run(rgb(method="fourier", terms=m32, shat="gaussian", base="general"), (film32, c32),
         f"Fourier M={m32}, Gaussian Ŝ f32", "float32", {"terms": m32, "shat": "gaussian"},
         np.float32, ref)
@@ -188,7 +188,7 @@ def bench_shading(cfg: BenchConfig, verbose: bool = True):
     for m in cfg.fourier_terms:
         fourier_out[m] = run(rgb(method="fourier", terms=m, base="general"), (film, c),
                              f"Fourier M={m}", "Fourier (tabulated Ŝ)",
-                             {"terms": m, "shat": "tabulated"}, np.float64, ref)
+                             {"terms": m, "shat": "exact"}, np.float64, ref)
     for m in cfg.gaussian_terms:
         run(rgb(method="fourier", terms=m, shat="gaussian", base="general"), (film, c),
             f"Fourier M={m}, Gaussian Ŝ", "Fourier (Gaussian Ŝ)",
@@ -199,7 +199,7 @@ def bench_shading(cfg: BenchConfig, verbose: bool = True):
 
     # M per tolerance: every M at once, checked against the timed rgb_reflectance values
     sweep = {}
-    for shat in ("tabulated", "gaussian") if cfg.gaussian_terms else ("tabulated",):
+    for shat in ("exact", "gaussian") if cfg.gaussian_terms else ("exact",):
         log(f"(a) M sweep 0…{cfg.m_sweep_max}, {shat} Ŝ", verbose)
         fn = jax.jit(functools.partial(fourier_bands, observer=SB, terms=cfg.m_sweep_max,
                                        shat=shat, partial_sums=True))
@@ -217,7 +217,7 @@ def bench_shading(cfg: BenchConfig, verbose: bool = True):
                 entry[f"smallest_M_{key}_below_{tol:g}"] = _smallest_m(errs, key, tol)
                 entry[f"smallest_M_{key}_below_{tol:g}_theta_le_80deg"] = _smallest_m(
                     errs80, key, tol)
-        if shat == "tabulated":
+        if shat == "exact":
             entry["max_diff_vs_rgb_reflectance"] = float(max(
                 np.abs(sums[m] - fourier_out[m]).max() for m in fourier_out
                 if m <= cfg.m_sweep_max))
@@ -353,7 +353,7 @@ def bench_kernels(cfg, film, theta, alpha, names, ref, exact_k29, ideal_out, lab
         log(f"(kernel) {path}", verbose)
         (f, co, mu, cv), i = inputs(dtype, sel)
         if kernel == "ideal":
-            fn = jax.jit(functools.partial(ideal_kernel, shat=knobs.get("shat", "tabulated"),
+            fn = jax.jit(functools.partial(ideal_kernel, shat=knobs.get("shat", "exact"),
                                            base=knobs.get("base", "general")))
             args = (f, co)
         else:

@@ -73,7 +73,7 @@ def fresnel_only(film: Film, cos_o, *, observer=SB, base: str = "general"):
     return refl[..., None] * shat_at_zero(observer, refl.dtype)[None, :]
 
 
-def _ideal(terms=2, shat="tabulated", base="general", observer=SB):
+def _ideal(terms=2, shat="exact", base="general", observer=SB):
     return lambda f, c, wo, mu, cv, lut: ideal_kernel(f, c, observer=observer, terms=terms,
                                                       shat=shat, base=base)
 

@@ -60,7 +60,7 @@ STABILITY_FUNCTIONS = (
     "airy_reflectance", "airy_reflectance[dielectric]", "rgb_reflectance[spectral]",
     "rgb_reflectance[spectral,cie_1931_2]", "rgb_reflectance[fourier,M=2]",
     "rgb_reflectance[fourier,M=2,gaussian]", *(f"patch_radiance[{m}]" for m in PATCH_METHODS),
-    "patch_radiance[filtered_gt_moments,lut]", "lut.lookup", "sensitivity_ft[tabulated]",
+    "patch_radiance[filtered_gt_moments,lut]", "lut.lookup", "sensitivity_ft[exact]",
     "sensitivity_ft[gaussian]", "opd.taylor_opd_moments", "filtered.filtered_bands",
 )
 def check_airy(dtype: str = "float64", base: str = "auto") -> StabilityResult:
@@ -116,8 +116,8 @@ def check_airy(dtype: str = "float64", base: str = "auto") -> StabilityResult:
     return res
 
 
-RGB_VARIANTS = (("spectral", SB, 2, "tabulated"), ("spectral", CIE, 2, "tabulated"),
-                ("fourier", SB, 2, "tabulated"), ("fourier", SB, 2, "gaussian"))
+RGB_VARIANTS = (("spectral", SB, 2, "exact"), ("spectral", CIE, 2, "exact"),
+                ("fourier", SB, 2, "exact"), ("fourier", SB, 2, "gaussian"))
 
 
 def _rgb_variants_fn(variants):
@@ -138,14 +138,14 @@ def _rgb_group(dtype: str):
 
 
 def check_rgb(dtype: str = "float64", method: str = "spectral", observer: str = SB,
-              terms: int = 2, shat: str = "tabulated") -> StabilityResult:
+              terms: int = 2, shat: str = "exact") -> StabilityResult:
     """`rgb_reflectance`: spectral bands within [Σ W⁻, Σ W⁺] (exact: R ∈ [0, 1]); the Fourier
     path within its truncation bound of the spectral one where the series holds, and
     exactly Ŝ_j(0) (R = 1) under TIR at 1|2 (series.py's documented limitation)."""
     t0 = time.perf_counter()
     tag = method if method == "spectral" else f"fourier,M={terms}"
     tag += "" if observer == SB else f",{observer}"
-    tag += "" if shat == "tabulated" else f",{shat}"
+    tag += "" if shat == "exact" else f",{shat}"
     res = StabilityResult(f"rgb_reflectance[{tag}]", dtype)
     variant = (method, observer, terms, shat)
     film, c, values, grads = _rgb_group(dtype)
@@ -182,7 +182,7 @@ def check_rgb(dtype: str = "float64", method: str = "spectral", observer: str = 
         slack = (1e-12 if dtype == "float64" else 2e-5) + 4 * eps * wabs * (
             4 * np.pi * film.thickness * film.eta_film / 380.0)[:, None]
         no_tir = ~tir[:, None]
-        if shat == "tabulated":
+        if shat == "exact":
             ref_check(res, np.where(no_tir, err, np.nan), tail + slack, case_args, call,
                        "spectral, |ΔR_j| ≤ truncation tail (no TIR at 1|2)")
             s0 = np.asarray(shat_at_zero(observer))
@@ -377,22 +377,22 @@ def check_lookup(dtype: str = "float64") -> StabilityResult:
     return res
 
 
-def check_sensitivity(dtype: str = "float64", method: str = "tabulated") -> StabilityResult:
+def check_sensitivity(dtype: str = "float64", method: str = "exact") -> StabilityResult:
     """`sensitivity_ft(x, sigma2=…)`: finite value and gradient for x up to 1e7 nm and σ²
-    from 0 to 1e30 nm²; tabulated: |Ŝ| ≤ ‖W‖₁ and equal to the host quadrature."""
+    from 0 to 1e30 nm²; exact: |Ŝ| ≤ ‖W‖₁ and equal to the host quadrature."""
     t0 = time.perf_counter()
     xs = np.array([0.0, 1e-6, 500.0, 1e4, 1e5, 1e7])
     xs = np.concatenate([xs, -xs[1:]])
     s2 = np.array([0.0, 1e-12, 1e4, 1e6, 1e12, 1e30])
     x, v2 = rounded(tuple(g.ravel() for g in np.meshgrid(xs, s2, indexing="ij")), dtype)
     res = StabilityResult(f"sensitivity_ft[{method}]", dtype, len(x))
-    val, grads = value_and_grads(lambda a, b: sensitivity_ft(a, sigma2=b, method=method),
+    val, grads = value_and_grads(lambda a, b: sensitivity_ft(a, sigma2=b, shat=method),
                                  as_dtype((x, v2), dtype), ("x", "sigma2"))
     case_args = {"x": x, "sigma2": v2}
     call = "sensitivity_ft"
     cval = val[0] + 1j * val[1]
     finish(res, val, grads, case_args, call, lambda v: np.moveaxis(v, 0, -1).reshape(len(x), -1))
-    if method == "tabulated":
+    if method == "exact":
         wabs = weights_range(SB)[2]
         bound_check(res, np.abs(cval), 0.0, wabs * (1 + 1e-6), case_args, call,
                      "|Ŝ_j| ≤ ‖W_j‖₁")
@@ -498,7 +498,7 @@ def stability_check(name: str, dtype: str) -> StabilityResult:
         method = opts[0]
         terms = int(opts[1][2:]) if method == "fourier" else 2
         return check_rgb(dtype, method, CIE if CIE in opts else SB, terms,
-                         "gaussian" if "gaussian" in opts else "tabulated")
+                         "gaussian" if "gaussian" in opts else "exact")
     if name.startswith("patch_radiance"):
         opts = name[name.index("[") + 1:-1].split(",")
         return check_patch(dtype, opts[0], opts[1] if len(opts) > 1 else "exact")

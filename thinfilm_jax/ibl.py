@@ -127,13 +127,13 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         rad = env.radiance.astype(dtype).reshape(-1, 3)
         nodes = (jnp.asarray(d, dtype), jnp.asarray(wt, dtype)[:, None] * rad[idx])
         cfg = ("reference", observer, subdivisions, int(n_cos), bool(cross_band), base,
-               _batch(batch_size, n_pts, len(wt)))
+               _batch(batch_size, n_pts, len(wt)), film.shape == ())
         return _exact_jit(Film(*args[:5]), args[5], *nv, env.radiance.astype(dtype), nodes, cfg)
     if not (isinstance(n_samples, int) and n_samples >= 1):
         raise ValueError(f"n_samples must be a positive int, got {n_samples!r}")
     key = jax.random.key(0) if key is None else key
     cfg = ("mc", observer, int(n_samples), 0, bool(cross_band), base,
-           _batch(batch_size, n_pts, n_samples * 64))
+           _batch(batch_size, n_pts, n_samples * 64), False)
     return _exact_jit(Film(*args[:5]), args[5], *nv, env.radiance.astype(dtype), key, cfg)
 
 
@@ -294,7 +294,7 @@ def _vndf_sample(u1, u2, wo_l, alpha):
 @functools.partial(jax.jit, static_argnums=(6,))
 def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
     """extra: (node directions, node weight × radiance) for the reference, a key for MC."""
-    method, observer, s, n_cos, cross, base, batch = cfg
+    method, observer, s, n_cos, cross, base, batch, one_film = cfg
     dtype = alpha.dtype
     obs = cross_band_name(observer) if cross else observer
     shape = alpha.shape
@@ -302,6 +302,9 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
     n_pts = flat[0].shape[0]
     if method == "reference":
         dirs, e = extra
+        # one film for every shading point: its R_jk(cos θ₁) table is built once, not per point
+        shared_table = (_r_table(Film(*(x[0] for x in flat[:5])), obs, n_cos, base, dtype)
+                        if one_film else None)
     else:
         keys = jax.random.split(extra, n_pts)
 
@@ -310,7 +313,8 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
         a, n, wo = xs[5], xs[6], xs[7]
         if method == "reference":
             wgt, c = _lobe_cos_weight(dirs, n, wo, a)  # (N,)
-            r = _interp(_r_table(f, obs, n_cos, base, dtype), c)  # (N, J[·3])
+            table = shared_table if one_film else _r_table(f, obs, n_cos, base, dtype)
+            r = _interp(table, c)  # (N, J[·3])
             light = wgt[:, None] * e  # (N, 3)
         else:
             k = xs[8]

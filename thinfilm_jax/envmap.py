@@ -39,6 +39,9 @@ class EnvMap(NamedTuple):
     def shape(self) -> tuple[int, int]:
         return self.radiance.shape[:2]
 
+    def astype(self, dtype) -> EnvMap:
+        return EnvMap(self.radiance.astype(dtype))
+
 
 def _fail(what: str, problem: str):
     raise ValueError(f"{what}: {problem}")

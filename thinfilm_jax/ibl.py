@@ -243,10 +243,10 @@ def _lobe_cos_weight(wi, n, wo, alpha):
     ci = jnp.sum(wi * n, -1)
     co = jnp.sum(wo * n, -1)
     hs = wi + wo
-    hn = jnp.sqrt(jnp.maximum(jnp.sum(hs * hs, -1), 1e-30))
+    up = (ci > 0) & (co > 0)  # then ω_i ≠ −ω_o and |ω_i + ω_o| > 0
+    hn = jnp.sqrt(jnp.where(up, jnp.sum(hs * hs, -1), 1.0))
     ch = jnp.sum(hs * n, -1) / hn
     c = jnp.sum(hs * wi, -1) / hn
-    up = (ci > 0) & (co > 0)
     cis = jnp.where(up, ci, 1.0)
     cos_ = jnp.where(up, co, 1.0)
     f = ndf(ch, alpha) * smith_g2(cis, cos_, alpha) / (4 * cos_)

@@ -41,6 +41,7 @@ from jax import Array
 from . import _validate as V
 from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance_weights,
                      texel_centers, texel_solid_angles)
+from .fresnel import complex_dtype
 from .lut import ShatLUT, build_shat_lut
 from .microfacet import albedo, ndf, smith_g2
 from .spectra import DEFAULT_OBSERVER, OBSERVERS
@@ -70,6 +71,12 @@ class PrefilteredEnvMap(NamedTuple):
     @property
     def per_channel(self) -> bool:
         return self.moments.ndim == 5
+
+    def astype(self, dtype) -> PrefilteredEnvMap:
+        """Every table in `dtype` (complex tables in its complex counterpart), e.g. float32
+        for the real-time paths."""
+        cdt = complex_dtype(jnp.zeros((), dtype))
+        return jax.tree.map(lambda x: x.astype(cdt if jnp.iscomplexobj(x) else dtype), self)
 
 
 def _features(d):

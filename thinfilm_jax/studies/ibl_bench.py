@@ -34,10 +34,6 @@ from .render import camera, sphere
 F32 = jnp.float32
 
 
-def _to32(tree):
-    return jax.tree.map(lambda x: x.astype(jnp.complex64 if jnp.iscomplexobj(x) else F32), tree)
-
-
 def frame_inputs(width: int, height: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     x = rng.uniform(-1, 1, (height, width))
@@ -76,7 +72,7 @@ REALTIME_VARIANTS = (
 
 def throughput(width=2560, height=1440, envmap="venice_sunset", verbose=True):
     env = load_envmap(envmap)
-    pref = _to32(prefilter_envmap(env))
+    pref = prefilter_envmap(env).astype(F32)
     film, alpha, n, view = frame_inputs(width, height)
     rows = []
     for name, kw in REALTIME_VARIANTS:

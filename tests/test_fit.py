@@ -18,8 +18,8 @@ import pytest
 
 from thinfilm_jax import Film, airy_reflectance
 from thinfilm_jax.cli import main as cli_main
-from thinfilm_jax.fit import (DEFAULT_BOUNDS, FitResult, _to_x, _to_y, fit_film, fit_spectrum,
-                              patch_model, spectrum_model)
+from thinfilm_jax.fit import (DEFAULT_BOUNDS, FitOptions, FitResult, _to_x, _to_y, fit_film,
+                              fit_spectrum, patch_model, spectrum_model)
 from thinfilm_jax.patch import patch_radiance
 
 FIG7 = Film(600.0, 1.3, 2.0, 0.5)  # Kneiphof et al. 2019 Figure 7 film (SPEC §7)
@@ -69,10 +69,13 @@ def test_single_start_finds_wrong_fringe(fig7_obs):
     (the thickness loss has minima ~220 nm apart; see notebooks/fitting.ipynb). The cheap
     `filtered` model (quadrature 8 × 8) is enough to show it."""
     q = (8, 8)
-    kw = dict(alpha=ALPHA, method="filtered", quadrature=q, start_quadrature=q)
-    one = fit_film(fig7_obs, THETA, initial=FIG7._replace(thickness=350.0), n_starts=1, **kw)
+    opts = FitOptions(quadrature=q, start_quadrature=q)
+    kw = dict(alpha=ALPHA, method="filtered")
+    one = fit_film(fig7_obs, THETA, initial=FIG7._replace(thickness=350.0),
+                   options=opts.replace(n_starts=1), **kw)
     assert abs(float(one.film.thickness) - 600.0) > 50.0
-    multi = fit_film(fig7_obs, THETA, initial=FIG7._replace(thickness=350.0), **kw)
+    multi = fit_film(fig7_obs, THETA, initial=FIG7._replace(thickness=350.0), options=opts,
+                     **kw)
     assert abs(float(multi.film.thickness) - 600.0) < 10.0  # filtered is biased by ~3 nm
     assert float(one.loss) > 10 * float(multi.loss)
 
@@ -125,7 +128,8 @@ def test_gradient_through_fit_film():
 
     def fitted(o):
         res = fit_film(o, THETA, alpha=ALPHA, initial=truth._replace(thickness=440.0),
-                       method="filtered", quadrature=q, start_quadrature=q, n_starts=1)
+                       method="filtered",
+                       options=FitOptions(quadrature=q, start_quadrature=q, n_starts=1))
         return res.film.thickness
 
     g = jax.grad(fitted)(obs)
@@ -171,7 +175,7 @@ def test_spectrum_stderr_coverage(spectra):
 
 def test_gradient_through_fit_spectrum(spectra):
     g = jax.grad(lambda o: fit_spectrum(o, LAMBDA, COS, initial=SPEC_FILM._replace(
-        thickness=800.0), n_starts=1).film.thickness)(jnp.asarray(spectra))
+        thickness=800.0), options=FitOptions(n_starts=1)).film.thickness)(jnp.asarray(spectra))
     jac = jax.jacfwd(lambda t: spectrum_model(SPEC_FILM._replace(thickness=t), COS, LAMBDA)
                      .reshape(-1))(812.3)
     np.testing.assert_allclose(np.asarray(g).reshape(-1), np.asarray(jac / (jac @ jac)),
@@ -185,7 +189,7 @@ def test_fit_spectrum_under_jit_and_vmap(spectra):
 
     def fitted(o):
         return fit_spectrum(o, LAMBDA, COS, initial=SPEC_FILM._replace(thickness=700.0),
-                            n_starts=64).film.thickness
+                            options=FitOptions(n_starts=64)).film.thickness
 
     d = jax.jit(jax.vmap(fitted))(jnp.stack([jnp.asarray(spectra), jnp.asarray(other)]))
     np.testing.assert_allclose(np.asarray(d), [812.3, 505.0], atol=TOL_D_SPECTRUM)
@@ -194,7 +198,8 @@ def test_fit_spectrum_under_jit_and_vmap(spectra):
 def test_solvers_by_name(spectra):
     init = SPEC_FILM._replace(thickness=790.0)
     for solver in ("gauss_newton", "dogleg", "bfgs"):
-        res = fit_spectrum(spectra, LAMBDA, COS, initial=init, n_starts=1, solver=solver)
+        res = fit_spectrum(spectra, LAMBDA, COS, initial=init,
+                           options=FitOptions(n_starts=1, solver=solver))
         assert abs(float(res.film.thickness) - 812.3) <= TOL_D_SPECTRUM, solver
 
 
@@ -212,7 +217,7 @@ def test_box_map_round_trip_and_bounds():
 def test_fitted_values_stay_in_bounds(spectra):
     # bounds are traced arguments: same compiled solver as test_fit_spectrum_thickness
     res = fit_spectrum(spectra, LAMBDA, COS, initial=SPEC_FILM._replace(thickness=750.0),
-                       bounds={"thickness": (700.0, 780.0)})
+                       options=FitOptions(bounds={"thickness": (700.0, 780.0)}))
     assert 700.0 <= float(res.film.thickness) <= 780.0
 
 
@@ -220,6 +225,9 @@ def test_fitted_values_stay_in_bounds(spectra):
 def _patch_call(**over):
     obs = np.full((9, 3), 0.1)
     kw = dict(alpha=ALPHA, initial=FIG7, free=("thickness",))
+    opt_fields = {k: over.pop(k) for k in list(over) if k in FitOptions.__dataclass_fields__}
+    if opt_fields:
+        kw["options"] = FitOptions(**opt_fields)
     kw.update(over)
     obs = kw.pop("observed", obs)
     theta = kw.pop("theta_o", THETA)
@@ -256,10 +264,10 @@ def test_fit_film_bad_inputs(over, err, match):
 
 
 @pytest.mark.parametrize("args, kw, match", [
-    ((np.zeros((2, 5)), np.linspace(400, 800, 5), [1.0, 0.5, 0.2]), {}, r"observed_R must"),
+    ((np.zeros((2, 5)), np.linspace(400, 800, 5), [1.0, 0.5, 0.2]), {}, r"observed must have shape"),
     ((np.zeros((1, 3)), [400.0, -5.0, 600.0], [1.0]), {}, r"wavelength must lie in"),
     ((np.zeros((1, 3)), [400.0, 500.0, 600.0], [1.5]), {}, r"cos_theta must lie in"),
-    ((np.full((1, 3), np.inf), [400.0, 500.0, 600.0], [1.0]), {}, r"observed_R must be finite"),
+    ((np.full((1, 3), np.inf), [400.0, 500.0, 600.0], [1.0]), {}, r"observed must be finite"),
     ((np.zeros((1, 3)), [400.0, 500.0, 600.0], [1.0]), dict(free=("alpha",)),
      r"unknown free parameter 'alpha'"),
 ])

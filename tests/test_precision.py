@@ -103,14 +103,14 @@ def test_fit_paths():
     a contraction does not depend on the dtype it is traced with."""
     theta = np.linspace(0.0, 1.2, 4)
     obs = jnp.full((4, 3), 0.1)
-    kw = dict(alpha=0.3, initial=tf.Film(400.0, 1.3, 2.0, 0.5), n_starts=4,
-              n_solves=2, start_steps=2, max_steps=2, quadrature=(4, 4),
-              start_quadrature=(4, 4), method="filtered")
+    kw = dict(alpha=0.3, initial=tf.Film(400.0, 1.3, 2.0, 0.5), method="filtered",
+              options=tf.FitOptions(n_starts=4, n_solves=2, start_steps=2, max_steps=2,
+                                    quadrature=(4, 4), start_quadrature=(4, 4)))
     fn = lambda o: tf.fit_film(o, theta, **kw).film.thickness  # noqa: E731
     assert count_contractions(fn, obs) >= 1
     assert_contractions_precise(fn, obs)
     lam = np.linspace(400.0, 700.0, 8)
-    spec = lambda r: tf.fit_spectrum(r, lam, [1.0], n_starts=4, n_solves=2,  # noqa: E731
-                                     start_steps=2, max_steps=2,
-                                     initial=tf.Film(400.0, 1.46, 2.0)).loss
+    spec = lambda r: tf.fit_spectrum(  # noqa: E731
+        r, lam, [1.0], initial=tf.Film(400.0, 1.46, 2.0),
+        options=tf.FitOptions(n_starts=4, n_solves=2, start_steps=2, max_steps=2)).loss
     assert_contractions_precise(spec, jnp.full((1, 8), 0.1))

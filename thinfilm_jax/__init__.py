@@ -20,6 +20,7 @@ from .envmap import SHIPPED as SHIPPED_ENVMAPS
 from .envmap import EnvMap as EnvMap
 from .envmap import load_envmap as load_envmap
 from .film import Film as Film
+from .fit import FitOptions as FitOptions
 from .fit import FitResult as FitResult
 from .fit import fit_film as fit_film
 from .fit import fit_spectrum as fit_spectrum

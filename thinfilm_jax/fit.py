@@ -11,7 +11,7 @@ Both minimise $\tfrac12\sum_k r_k^2$ with weighted residuals $r_k = (m_k(x) - o_
 (σ = 1 unless given) with optimistix (`optx.least_squares`, Levenberg–Marquardt by default).
 
 **Bounded parameters.** Every free parameter lives in a box [lo, hi] (`DEFAULT_BOUNDS`,
-overridable with `bounds=`) and is solved for in an unconstrained variable y with
+overridable with `FitOptions.bounds`) and is solved for in an unconstrained variable y with
 
 $$ x = lo + (hi - lo)\,\sigma(y),\qquad y = \operatorname{logit}\frac{x - lo}{hi - lo}, $$
 
@@ -37,8 +37,8 @@ A full solve from every one of 64 starts would cost ~5 model evaluations per ste
 start; screening costs one per start. Stages 1–2 use the start model: `method` at the
 coarse `start_quadrature` (default (8, 8), ~4e-4 from converged: enough to rank fringe
 orders), and stage 3 `refine_method` (default: `method`) at `quadrature`. So
-``method="filtered", refine_method="reference"`` screens and explores with the real-time
-path (~100× cheaper) and measures with the reference.
+``method="filtered", options=FitOptions(refine_method="reference")`` screens and explores
+with the real-time path (~100× cheaper) and measures with the reference.
 
 **Batching.** The starts are batched with `jax.vmap` on accelerators and with a sequential
 `jax.lax.map` on CPU (``batching="auto"``; "vmap" / "map" force one): a vmapped
@@ -71,6 +71,7 @@ multi-start stage is under `stop_gradient`.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -90,8 +91,8 @@ from .lut import build_shat_lut
 from .patch import METHODS, patch_one
 from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 
-__all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "FitResult", "SOLVERS", "fit_film", "fit_spectrum",
-           "patch_model", "spectrum_model"]
+__all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "FitOptions", "FitResult", "SOLVERS", "fit_film",
+           "fit_spectrum", "patch_model", "spectrum_model"]
 
 FILM_PARAMS = Film._fields  # ("thickness", "eta_film", "eta_base", "kappa_base", "eta_outer")
 PARAMS = (*FILM_PARAMS, "alpha")
@@ -120,6 +121,153 @@ SOLVERS = {
 DEGENERATE_CORRELATION = 0.95
 BATCHING = ("auto", "vmap", "map")
 _START_MARGIN = 5e-3  # starting points at least this fraction of the box inside it
+
+
+#: Default number of screened thicknesses per problem (`FitOptions.n_starts` = None):
+#: spectral minima are closer together than patch-colour minima, and the model is cheap.
+DEFAULT_N_STARTS = {"patch": 64, "spectrum": 256}
+
+
+@dataclasses.dataclass(frozen=True)
+class FitOptions:
+    """How `fit_film` / `fit_spectrum` search and solve: one frozen, hashable value.
+
+    The observations, the model's physics (`alpha`, `initial`, `free`, `method`) and the
+    data's uncertainties (`sigma`) are arguments of the fit; everything about *how* the
+    optimum is found lives here, validated once on construction. Equal options hash
+    equal, so they can key a cache or a `jax.jit` static argument; vary one field with
+    ``dataclasses.replace(opts, n_starts=16)`` or ``opts.replace(n_starts=16)``.
+
+    Search (both fits):
+        solver: a `SOLVERS` name (Levenberg–Marquardt by default).
+        n_starts: thickness guesses spread over the thickness box (midpoints of equal
+            cells), screened by their loss; 1 = the initial guess only; None = the
+            problem's default (`DEFAULT_N_STARTS`: 64 for patches, 256 for spectra).
+        n_eta_starts: if "eta_film" is free, the thickness grid is screened at the
+            initial η₂ and at this many η₂ values spread over its box (0: initial η₂ only).
+        n_solves: short solves from the best-screened guesses (None: 2 per screened η₂
+            row, at least 8).
+        starts: explicit thickness guesses (nm) instead of the spread.
+        start_steps: solver steps of each short solve.
+        max_steps: solver steps of the final solve.
+        rtol, atol: solver tolerances (on the unconstrained parameters and the loss).
+        bounds: {name: (lo, hi)} overriding `DEFAULT_BOUNDS` (stored as a sorted tuple of
+            pairs; `bounds_dict` gives the dict back).
+        absolute_sigma: treat the fit's `sigma` as exact standard deviations (s² = 1)
+            instead of estimating s² from the residuals.
+        batching: how the starts are batched: "vmap", "map" (sequential `lax.map`) or
+            "auto" (map on CPU, vmap on accelerators; module docstring).
+
+    Patch model (`fit_film` only; `fit_spectrum` rejects non-default values):
+        refine_method: if given (and different from the fit's `method`), the best
+            solution of `method` is refined with this model, e.g. ``method="filtered"``
+            with ``refine_method="reference"``: screening and multi-start with the cheap
+            real-time path, one final solve with the reference.
+        observer, terms, shat, ndf: as for `patch_radiance`.
+        quadrature: (n_u, n_φ) of the fit's half-vector quadrature (default (16, 16);
+            accuracy in the module docstring).
+        start_quadrature: quadrature of the screening and short solves (None:
+            `quadrature`).
+
+    Example:
+        >>> opts = FitOptions(n_starts=32, quadrature=(8, 8))
+        >>> opts.replace(max_steps=20).max_steps, hash(opts) == hash(FitOptions(n_starts=32,
+        ...     quadrature=[8, 8]))
+        (20, True)
+    """
+
+    solver: str = "levenberg_marquardt"
+    n_starts: int | None = None
+    n_eta_starts: int = 6
+    n_solves: int | None = None
+    starts: tuple | None = None
+    start_steps: int = 50
+    max_steps: int = 100
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    bounds: tuple | None = None
+    absolute_sigma: bool = False
+    batching: str = "auto"
+    refine_method: str | None = None
+    observer: str = DEFAULT_OBSERVER
+    terms: int = 2
+    shat: str = "exact"
+    quadrature: tuple = (16, 16)
+    start_quadrature: tuple | None = (8, 8)
+    ndf: str = "ggx"
+
+    def __post_init__(self):
+        put = functools.partial(object.__setattr__, self)
+        V.check_choice("solver", self.solver, SOLVERS)
+        for name in ("n_starts", "n_solves"):
+            v = getattr(self, name)
+            if v is not None:
+                put(name, V.check_int(name, v, 1))
+        put("n_eta_starts", V.check_int("n_eta_starts", self.n_eta_starts, 0))
+        put("start_steps", V.check_int("start_steps", self.start_steps, 1))
+        put("max_steps", V.check_int("max_steps", self.max_steps, 1))
+        for name in ("rtol", "atol"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not (isinstance(v, int | float | np.floating)
+                                           and np.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a non-negative float, got {v!r}")
+            put(name, float(v))
+        if self.starts is not None:
+            try:
+                d = np.sort(np.asarray(self.starts, float).reshape(-1))
+            except (TypeError, ValueError):
+                raise ValueError(f"starts must be thicknesses (nm), got {self.starts!r}") from None
+            if d.size == 0 or not np.all(np.isfinite(d)):
+                raise ValueError("starts must be finite thicknesses (nm), at least one")
+            put("starts", tuple(float(v) for v in d))
+        put("bounds", _normalise_bounds(self.bounds))
+        if not isinstance(self.absolute_sigma, bool | np.bool_):
+            raise ValueError(f"absolute_sigma must be a bool, got {self.absolute_sigma!r}")
+        put("absolute_sigma", bool(self.absolute_sigma))
+        V.check_choice("batching", self.batching, BATCHING)
+        if self.refine_method is not None:
+            V.check_choice("refine_method", self.refine_method, METHODS)
+        V.check_choice("observer", self.observer, OBSERVERS)
+        V.check_choice("shat", self.shat, SHAT_SOURCES)
+        V.check_choice("ndf", self.ndf, ("ggx", "beckmann"))
+        put("terms", V.check_int("terms", self.terms, 0))
+        put("quadrature", _check_quadrature("quadrature", self.quadrature))
+        if self.start_quadrature is not None:
+            put("start_quadrature", _check_quadrature("start_quadrature",
+                                                      self.start_quadrature))
+
+    @property
+    def bounds_dict(self) -> dict:
+        """{name: (lo, hi)}: `DEFAULT_BOUNDS` with the overrides of `bounds` applied."""
+        return {**DEFAULT_BOUNDS, **dict(self.bounds or ())}
+
+    def replace(self, **changes) -> FitOptions:
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+
+_PATCH_ONLY = ("refine_method", "observer", "terms", "shat", "quadrature", "start_quadrature",
+               "ndf")
+
+
+def _normalise_bounds(bounds):
+    """{name: (lo, hi)} or pairs → a sorted tuple of (name, (lo, hi)) (hashable), checked."""
+    if bounds is None:
+        return None
+    items = bounds.items() if isinstance(bounds, dict) else bounds
+    out = {}
+    for k, v in items:
+        if k not in DEFAULT_BOUNDS:
+            raise ValueError(f"bounds: unknown parameter {k!r}; expected names from "
+                             f"{list(DEFAULT_BOUNDS)}")
+        try:
+            lo, hi = (float(t) for t in v)
+        except (TypeError, ValueError):
+            raise ValueError(f"bounds[{k!r}] must be a pair (lo, hi); got {v!r}") from None
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise ValueError(f"bounds[{k!r}] must be finite with lo < hi; got {v!r}")
+        out[k] = (lo, hi)
+    return tuple(sorted(out.items()))
 
 
 class FitResult(NamedTuple):
@@ -423,23 +571,16 @@ def _check_free(free, allowed):
 
 
 def _make_spec(free, bounds, x0):
-    b = dict(DEFAULT_BOUNDS)
-    for k, v in (bounds or {}).items():
-        if k not in b:
-            raise ValueError(f"bounds: unknown parameter {k!r}; expected names from {list(b)}")
-        lo, hi = (float(t) for t in v)
-        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-            raise ValueError(f"bounds[{k!r}] must be finite with lo < hi; got {v!r}")
-        b[k] = (lo, hi)
+    """The free parameters' `_Spec`; `bounds` is the full {name: (lo, hi)} dict."""
     index = tuple(PARAMS.index(k) for k in free)
     for k, i in zip(free, index):
-        lo, hi = b[k]
+        lo, hi = bounds[k]
         if V.is_concrete(x0[i]):
             v = float(np.asarray(x0[i]))
             if not lo <= v <= hi:
                 raise ValueError(f"initial {k} = {v!r} lies outside its bounds [{lo}, {hi}]")
-    return _Spec(free, index, np.asarray([b[k][0] for k in free]),
-                 np.asarray([b[k][1] for k in free]))
+    return _Spec(free, index, np.asarray([bounds[k][0] for k in free]),
+                 np.asarray([bounds[k][1] for k in free]))
 
 
 def _static(spec):
@@ -463,18 +604,20 @@ def _check_scalar_film(film):
     return film
 
 
-def _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol):
-    V.check_choice("solver", solver, SOLVERS)
-    if not (isinstance(n_eta_starts, int | np.integer) and not isinstance(n_eta_starts, bool)
-            and n_eta_starts >= 0):
-        raise ValueError(f"n_eta_starts must be an int >= 0, got {n_eta_starts!r}")
-    for name, v in (("n_starts", n_starts), ("n_solves", 1 if n_solves is None else n_solves),
-                    ("start_steps", start_steps), ("max_steps", max_steps)):
-        if not (isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= 1):
-            raise ValueError(f"{name} must be an int >= 1, got {v!r}")
-    for name, v in (("rtol", rtol), ("atol", atol)):
-        if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
-            raise ValueError(f"{name} must be a non-negative float, got {v!r}")
+def _check_options(options, kind):
+    """The `FitOptions` of a fit (default if None); patch-only fields rejected for spectra."""
+    if options is None:
+        options = FitOptions()
+    if not isinstance(options, FitOptions):
+        raise TypeError(f"options must be a thinfilm_jax.FitOptions, got "
+                        f"{type(options).__name__}")
+    if kind == "spectrum":
+        default = FitOptions()
+        changed = [k for k in _PATCH_ONLY if getattr(options, k) != getattr(default, k)]
+        if changed:
+            raise ValueError(f"FitOptions field(s) {changed} apply to fit_film (patch models) "
+                             f"only")
+    return options
 
 
 def _check_quadrature(name, q):
@@ -529,15 +672,8 @@ class _FilmCfg(NamedTuple):
 
 
 def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = ("thickness",),
-             method: str = "reference", refine_method: str | None = None,
-             observer: str = DEFAULT_OBSERVER, terms: int = 2, shat: str = "exact",
-             quadrature: tuple[int, int] = (16, 16),
-             start_quadrature: tuple[int, int] | None = (8, 8), ndf: str = "ggx",
-             solver: str = "levenberg_marquardt", n_starts: int = 64, n_eta_starts: int = 6,
-             n_solves: int | None = None, starts=None, start_steps: int = 50,
-             max_steps: int = 100, rtol: float = 1e-8, atol: float = 1e-10,
-             bounds: dict | None = None, sigma=None, absolute_sigma: bool = False,
-             batching: str = "auto") -> FitResult:
+             method: str = "reference", sigma=None,
+             options: FitOptions | None = None) -> FitResult:
     """Fit film parameters (and α) to patch radiances observed at view angles θ_o (SPEC §8).
 
     Residuals r = (model − observed)/σ over all angles and bands; the model is
@@ -553,31 +689,8 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
             works under `jax.jit`, `jax.vmap` and `jax.grad` with respect to it).
         free: names of the fitted parameters: `Film` fields and/or "alpha".
         method: forward model, a `patch.METHODS` name (SPEC §7).
-        refine_method: if given (and different from `method`), the best solution of
-            `method` is refined with this model, e.g. ``method="filtered",
-            refine_method="reference"``: screening and multi-start with the cheap
-            real-time path, one final solve with the reference.
-        observer, terms, shat, ndf: as for `patch_radiance`.
-        quadrature: (n_u, n_φ) of the fit's half-vector quadrature (default (16, 16);
-            accuracy in the module docstring).
-        start_quadrature: quadrature of the screening of the starts (None: `quadrature`).
-        solver: a `SOLVERS` name; Levenberg–Marquardt by default.
-        n_starts: thickness guesses spread over the thickness box (midpoints of equal
-            cells), screened by their loss; 1 means the initial guess only.
-        n_eta_starts: if "eta_film" is free, the thickness grid is screened at the initial
-            η₂ and at this many η₂ values spread over its box (0: initial η₂ only).
-        n_solves: short solves from the best-screened guesses (default: 2 per screened
-            η₂ row, at least 8).
-        starts: explicit thickness guesses (nm) instead of the spread.
-        start_steps: solver steps of each short solve.
-        max_steps: solver steps of the final solve.
-        rtol, atol: solver tolerances (on the unconstrained parameters and the loss).
-        bounds: {name: (lo, hi)} overriding `DEFAULT_BOUNDS`.
         sigma: standard deviations of the observations (broadcast to `observed`).
-        absolute_sigma: treat `sigma` as exact (s² = 1) instead of estimating s² from the
-            residuals.
-        batching: how the starts are batched: "vmap", "map" (sequential `lax.map`) or
-            "auto" (map on CPU, vmap on accelerators; see the module docstring).
+        options: `FitOptions` (search, solver, quadrature, observer, ...); None = defaults.
 
     Returns:
         `FitResult`.
@@ -596,19 +709,12 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
     initial = _check_scalar_film(initial)
     free = _check_free(free, PARAMS)
     V.check_choice("method", method, METHODS)
-    if refine_method is not None:
-        V.check_choice("refine_method", refine_method, METHODS)
-        if refine_method == method:
-            refine_method = None
-    V.check_choice("observer", observer, OBSERVERS)
-    V.check_choice("shat", shat, SHAT_SOURCES)
-    V.check_choice("ndf", ndf, ("ggx", "beckmann"))
-    terms = V.check_int("terms", terms, 0)
-    quadrature = _check_quadrature("quadrature", quadrature)
-    start_quadrature = (quadrature if start_quadrature is None
-                        else _check_quadrature("start_quadrature", start_quadrature))
-    _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol)
-    batching = _check_batching(batching)
+    o = _check_options(options, "patch")
+    refine_method = None if o.refine_method == method else o.refine_method
+    observer = o.observer
+    quadrature = o.quadrature
+    start_quadrature = quadrature if o.start_quadrature is None else o.start_quadrature
+    batching = _check_batching(o.batching)
     theta_o = jnp.atleast_1d(jnp.asarray(V.as_array("theta_o", theta_o)))
     if theta_o.ndim != 1:
         raise ValueError(f"theta_o must be 1-D (n_angles,), got shape {theta_o.shape}")
@@ -629,16 +735,17 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
                          f"parameters {free}")
     dtype = jnp.result_type(observed, theta_o, alpha, *initial, float)
     x0 = jnp.stack([jnp.asarray(v, dtype) for v in (*initial, alpha)])
-    spec = _make_spec(free, bounds, [*initial, alpha])
-    y_starts, x_starts, n_cols = _grid_starts(spec, [*initial, alpha], n_starts, n_eta_starts,
-                                              starts, dtype)
+    spec = _make_spec(free, o.bounds_dict, [*initial, alpha])
+    n_starts = DEFAULT_N_STARTS["patch"] if o.n_starts is None else o.n_starts
+    y_starts, x_starts, n_cols = _grid_starts(spec, [*initial, alpha], n_starts,
+                                              o.n_eta_starts, o.starts, dtype)
     w = _weights(sigma, observed.shape, dtype)
-    lut = build_shat_lut(observer, dtype=dtype) if shat == "lut" else None
+    lut = build_shat_lut(observer, dtype=dtype) if o.shat == "lut" else None
     static, box = _static(spec)
-    cfg = _FilmCfg(static, method, refine_method, observer, terms, shat, quadrature,
-                   start_quadrature, ndf, solver, float(rtol), float(atol), n_cols,
-                   _n_candidates(y_starts, n_cols, n_solves), int(start_steps), int(max_steps),
-                   bool(absolute_sigma), batching)
+    cfg = _FilmCfg(static, method, refine_method, observer, o.terms, o.shat, quadrature,
+                   start_quadrature, o.ndf, o.solver, o.rtol, o.atol, n_cols,
+                   _n_candidates(y_starts, n_cols, o.n_solves), o.start_steps, o.max_steps,
+                   o.absolute_sigma, batching)
     box = tuple(jnp.asarray(b, dtype) for b in box)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
         sol, x, loss, resid, stderr, corr, start_loss = _fit_film_jit(
@@ -697,27 +804,23 @@ class _SpecCfg(NamedTuple):
     batching: str
 
 
-def fit_spectrum(observed_R, wavelength, cos_theta, *, initial: Film,
-                 free: Sequence[str] = ("thickness",), solver: str = "levenberg_marquardt",
-                 n_starts: int = 256, n_eta_starts: int = 6, n_solves: int | None = None,
-                 starts=None,
-                 start_steps: int = 50,
-                 max_steps: int = 100,
-                 rtol: float = 1e-8, atol: float = 1e-10, bounds: dict | None = None,
-                 sigma=None, absolute_sigma: bool = False, batching: str = "auto") -> FitResult:
+def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film,
+                 free: Sequence[str] = ("thickness",), sigma=None,
+                 options: FitOptions | None = None) -> FitResult:
     """Fit film parameters to reflectance spectra R(θ₁, λ) (SPEC §2; film metrology).
 
     The model is `spectrum_model` (the exact Airy reflectance, general Fresnel path).
 
     Args:
-        observed_R: unpolarised reflectance, shape (n_angles, n_wl) (or (n_wl,) for one angle).
+        observed: unpolarised reflectance, shape (n_angles, n_wl) (or (n_wl,) for one angle).
         wavelength: λ in nm, shape (n_wl,).
         cos_theta: cos θ₁ of each spectrum, shape (n_angles,) (or scalar), in [0, 1].
         initial: `Film` with scalar fields (fixed values and initial guesses).
         free: `Film` field names to fit.
-        n_starts: thickness guesses screened (default 256: spectral minima are closer
-            together than patch-colour minima, and the model is cheap).
-        Other arguments as for `fit_film`.
+        sigma: standard deviations of the observations (broadcast to `observed`).
+        options: `FitOptions` (search and solver fields; the patch-model fields must keep
+            their defaults). ``n_starts=None`` screens 256 thicknesses: spectral minima are
+            closer together than patch-colour minima, and the model is cheap.
 
     Returns:
         `FitResult` with ``alpha=None``; residuals of shape (n_angles, n_wl).
@@ -736,8 +839,8 @@ def fit_spectrum(observed_R, wavelength, cos_theta, *, initial: Film,
         raise TypeError(f"initial must be a thinfilm_jax.Film, got {type(initial).__name__}")
     initial = _check_scalar_film(initial)
     free = _check_free(free, FILM_PARAMS)
-    _check_common(solver, n_starts, n_eta_starts, n_solves, start_steps, max_steps, rtol, atol)
-    batching = _check_batching(batching)
+    o = _check_options(options, "spectrum")
+    batching = _check_batching(o.batching)
     wavelength = jnp.asarray(V.as_array("wavelength", wavelength))
     cos_theta = jnp.atleast_1d(jnp.asarray(V.as_array("cos_theta", cos_theta)))
     if wavelength.ndim != 1 or cos_theta.ndim != 1:
@@ -745,31 +848,32 @@ def fit_spectrum(observed_R, wavelength, cos_theta, *, initial: Film,
                          f"{cos_theta.shape}")
     wavelength = V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
     cos_theta = V.check_cos_theta(cos_theta)
-    observed_R = jnp.asarray(V.as_array("observed_R", observed_R))
-    if observed_R.ndim == 1:
-        observed_R = observed_R[None, :]
+    observed = jnp.asarray(V.as_array("observed", observed))
+    if observed.ndim == 1:
+        observed = observed[None, :]
     shape = (cos_theta.shape[0], wavelength.shape[0])
-    if observed_R.shape != shape:
-        raise ValueError(f"observed_R must have shape (n_angles, n_wl) = {shape} to match "
-                         f"cos_theta and wavelength; got {observed_R.shape}")
-    V.check_finite("observed_R", observed_R)
-    if observed_R.size <= len(free):
-        raise ValueError(f"{observed_R.size} observations cannot determine {len(free)} free "
+    if observed.shape != shape:
+        raise ValueError(f"observed must have shape (n_angles, n_wl) = {shape} to match "
+                         f"cos_theta and wavelength; got {observed.shape}")
+    V.check_finite("observed", observed)
+    if observed.size <= len(free):
+        raise ValueError(f"{observed.size} observations cannot determine {len(free)} free "
                          f"parameters {free}")
-    dtype = jnp.result_type(observed_R, wavelength, cos_theta, *initial, float)
+    dtype = jnp.result_type(observed, wavelength, cos_theta, *initial, float)
     x0 = jnp.stack([jnp.asarray(v, dtype) for v in (*initial, 1.0)])
-    spec = _make_spec(free, bounds, [*initial, 1.0])
-    y_starts, x_starts, n_cols = _grid_starts(spec, [*initial, 1.0], n_starts, n_eta_starts,
-                                              starts, dtype)
+    spec = _make_spec(free, o.bounds_dict, [*initial, 1.0])
+    n_starts = DEFAULT_N_STARTS["spectrum"] if o.n_starts is None else o.n_starts
+    y_starts, x_starts, n_cols = _grid_starts(spec, [*initial, 1.0], n_starts,
+                                              o.n_eta_starts, o.starts, dtype)
     w = _weights(sigma, shape, dtype)
     static, box = _static(spec)
-    cfg = _SpecCfg(static, solver, float(rtol), float(atol), n_cols,
-                   _n_candidates(y_starts, n_cols, n_solves),
-                   int(start_steps), int(max_steps), bool(absolute_sigma), batching)
+    cfg = _SpecCfg(static, o.solver, o.rtol, o.atol, n_cols,
+                   _n_candidates(y_starts, n_cols, o.n_solves), o.start_steps, o.max_steps,
+                   o.absolute_sigma, batching)
     box = tuple(jnp.asarray(b, dtype) for b in box)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
         sol, x, loss, resid, stderr, corr, start_loss = _fit_spectrum_jit(
-            observed_R.astype(dtype), w, wavelength.astype(dtype), cos_theta.astype(dtype), x0,
+            observed.astype(dtype), w, wavelength.astype(dtype), cos_theta.astype(dtype), x0,
             y_starts, box, cfg)
     film, _ = _split(x)
     return FitResult(film, None, loss, sol.result == optx.RESULTS.successful,

@@ -344,6 +344,14 @@ def _settings(path, obs, kind):
 
 
 # ----------------------------------------------------------------------------- main
+def _call_kw(kw, options_cls):
+    """Settings → keyword arguments of the fit: `free`, `method` stay keywords, the rest
+    becomes its `FitOptions` (invalid values raise ValueError, reported as file errors)."""
+    call = {k: kw[k] for k in ("free", "method") if k in kw}
+    call["options"] = options_cls(**{k: v for k, v in kw.items() if k not in call})
+    return call
+
+
 def check_output(path: Path, out: Path, overwrite: bool) -> None:
     """Refuse, before any work, an output that is the input, a directory, below a file, or
     (without `overwrite`) an existing file."""
@@ -380,7 +388,7 @@ def run_fit_cli(args) -> int:
 
     from ._io import write_json
     from .film import Film
-    from .fit import fit_film, fit_spectrum
+    from .fit import FitOptions, fit_film, fit_spectrum
 
     initial = Film(**film_kw)
     sigma = obs.get("sigma")
@@ -404,7 +412,7 @@ def run_fit_cli(args) -> int:
             if not 0.0 < alpha <= 1.0:
                 _fail(path, f"alpha = {alpha!r} lies outside (0, 1]")
             res = fit_film(observed, np.deg2rad(theta), alpha=alpha, initial=initial,
-                           sigma=sigma, **kw)
+                           sigma=sigma, **_call_kw(kw, FitOptions))
             data = {"theta_o_deg": theta.tolist(), "observed": observed.tolist()}
         else:
             for k in ("wavelength_nm", "R"):
@@ -417,7 +425,7 @@ def run_fit_cli(args) -> int:
             _in_range(path, "theta_deg", theta, 0.0, 90.0, " degrees")
             refl = _array(path, "R", obs["R"], (1, 2))
             res = fit_spectrum(refl, lam, np.cos(np.deg2rad(theta)), initial=initial,
-                               sigma=sigma, **kw)
+                               sigma=sigma, **_call_kw(kw, FitOptions))
             data = {"wavelength_nm": lam.tolist(), "theta_deg": theta.tolist(),
                     "R": np.atleast_2d(refl).tolist()}
     except (ValueError, TypeError) as e:

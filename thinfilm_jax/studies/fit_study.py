@@ -37,7 +37,7 @@ import numpy as np
 from .._io import write_json
 from ..airy import airy_reflectance
 from ..film import Film
-from ..fit import fit_film, fit_spectrum, patch_model, spectrum_model
+from ..fit import FitOptions, fit_film, fit_spectrum, patch_model, spectrum_model
 from ..patch import patch_radiance
 
 THETA_O = np.deg2rad(np.linspace(0.0, 80.0, 9))
@@ -48,7 +48,8 @@ TOL = {"thickness": 5.0, "eta_film": 0.01}
 NOISE = 0.01
 MODELS = {
     "filtered": dict(method="filtered"),
-    "filtered+reference": dict(method="filtered", refine_method="reference"),
+    "filtered+reference": dict(method="filtered",
+                               options=FitOptions(refine_method="reference")),
     "reference": dict(method="reference"),
 }
 
@@ -141,7 +142,8 @@ def run(n, seed, out, models=tuple(MODELS), spectra=True):
                                **MODELS[m])
                 jax.block_until_ready(res.loss)
                 dt = time.perf_counter() - t0
-            final = MODELS[m].get("refine_method", MODELS[m]["method"])
+            final = (MODELS[m].get("options") or FitOptions()).refine_method or \
+                MODELS[m]["method"]
             lt = float(patch_loss(film, p["alpha"], obs, final))
             rows[m].append(record(res, p, dt, lt))
         if spectra:

@@ -39,6 +39,8 @@ from .prefilter import prefilter_envmap as prefilter_envmap
 from .reflectance import rgb_reflectance as rgb_reflectance
 from .series import SeriesTerms as SeriesTerms
 from .series import series_terms as series_terms
+from .sharding import map_sharded as map_sharded
+from .sharding import shard_batch as shard_batch
 from .spectra import OBSERVERS as OBSERVERS
 from .spectra import get_observer as get_observer
 from .spectra import sensitivity_ft as sensitivity_ft

@@ -1,0 +1,307 @@
+r"""The improved real-time filtered model (`method="improved"`, issue #11): K 29 per quantile bin.
+
+Both `patch_radiance` and `envmap_radiance` call `improved_kernel`; it uses what `filtered`
+may use in real time (a table in (θ_o, α), the Ŝ LUT, the shading point's n, ω_o, α, film).
+
+**What is approximated.** Under a light lobe p (uniform light: p = p_R ∝ ρ̃⟨n,ω_i⟩, K 12) the
+film's band reflectance is an expectation over the microfacet incidence cosine
+c = cos θ₁ = ⟨h, ω_i⟩ alone (SPEC §7):
+
+$$ \bar R_j = \mathbb E_p\big[R_j(c)\big],\qquad
+   R_j(c) = C_0(c)\hat S_j(0) + \sum_{m=1}^{M} C_m(c)\big[e^{im\varphi_2(c)}\hat S_j(-mD(c))
+   + \text{c.c.}\big],\qquad D(c) = 2d\sqrt{\eta_2^2-\eta_1^2(1-c^2)} \quad (K\ 4, 5). $$
+
+K 29 replaces the distribution of c by one point, cos θ₁* of the mean light direction (K 22)
+for C_m, φ₂, and by a Gaussian on D (K 20–28). Both are poor where the distribution of c is
+wide and skewed (rough films, grazing views): C₀(c) is convex, so C₀(E c) ≠ E C₀(c) (a Jensen
+bias, the largest error of K 29), and D(c) inherits the skew.
+
+**The model.** Split the distribution of c into K bins of equal probability,
+B_k = [q_{(k−1)/K}, q_{k/K}] (q_t: the t-quantile of c under p), so that exactly
+
+$$ \bar R_j = \frac1K\sum_{k=1}^{K}\mathbb E\big[R_j(c)\,\big|\,c\in B_k\big]. $$
+
+Inside a bin c has mean c̄_k and standard deviation s_k ≪ the whole spread. Apply K 29 per
+bin: the BB17 terms at c̄_k (the Jensen error falls as s_k², i.e. by ~K² for a smooth
+density), and D Gaussian with the first-order moments of D(c) about c̄_k (K 25–28's Taylor
+chain, written in c):
+
+$$ \mu_{D,k} = D(\bar c_k),\qquad \sigma_{D,k} = |D'(\bar c_k)|\,s_k,\qquad
+   D'(c) = \frac{(2d)^2\eta_1^2\,c}{D(c)}, $$
+$$ \bar R_j \approx \frac1K\sum_{k=1}^{K}\Big\{C_0(\bar c_k)\hat S_j(0) + \sum_{m=1}^{M}
+   C_m(\bar c_k)\big[e^{im\varphi_2(\bar c_k)}\hat S_j(-m\mu_{D,k}, m^2\sigma_{D,k}^2)
+   + \text{c.c.}\big]\Big\}\qquad (\text{K 29 per bin}). $$
+
+The skewed mixture of K Gaussians on D follows the true distribution of D(c), and the C₀
+average is a K-point rule placed where the mass is. K = 2 is the default (K = 3 is more
+accurate and costs 1.5× more); K = 1 is K 29 fed with the exact E[c], Var c (not ⟨ω_o, μ_ω⟩).
+
+**Table.** c̄_k − cos θ_o and s_k depend only on (θ_o, α) (and the NDF): `bin_table` computes
+them once on the host from the exact half-vector quadrature (`microfacet.patch_quadrature`,
+horizon clipping and the non-split-sum lobe included) on a uniform grid of (√cos θ_o, √α),
+the grid of the albedo table, and `lookup_bins` reads them bilinearly. Storing offsets from
+cos θ_o makes α → 0 exact: every bin collapses onto c = cos θ_o with s = 0, i.e. `ideal`.
+
+**Ŝ.** ``shat="lut"`` reads the Ŝ(μ, σ²) table of `lut` (the same table `filtered` reads)
+*bilinearly* in (|μ|, σ) (`lookup_linear`), not bicubically: the table stores the slowly
+varying demodulated envelope (≳ 1 µm scale against Δμ = 25 nm), so the bilinear read is
+within 2e-3 of the exact Ŝ and about 10× cheaper on a CPU, which pays for the K bins.
+``"exact"`` and ``"gaussian"`` are as for `filtered_kernel`.
+
+**Under an environment** (`envmap_radiance`) the table gives the lobe of uniform light. The
+light-weighted lobe differs by the radiance distribution inside it; the prefiltered
+moments tell how: with μ_x, σ_x² the projection ⟨ω_o, ·⟩ of the map's moments and μ_x⁰,
+σ_x⁰² the same for a constant map (`splitsum_projection`, closed form from
+`microfacet.lobe_moments_normal_view`), `shift_bins` moves every bin in x = 2c² − 1 (cos of the
+angle between ω_i and ω_o) by μ_x − μ_x⁰ and scales its spread about the mean by σ_x/σ_x⁰.
+A constant environment gives exactly the uniform-light model (tests).
+
+Measured gains, cost and the regions where it is not better: docs/improved.md.
+
+Example:
+    >>> import jax.numpy as jnp
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.improved import bin_table, improved_kernel
+    >>> tab = bin_table(shape=(16, 9), quadrature=(24, 24))
+    >>> improved_kernel(Film(600.0, 1.3, 2.0, 0.5), 0.8, 0.25, tab, shat="exact").shape
+    (3,)
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from .film import Film
+from .fresnel import complex_dtype, safe_div, safe_sqrt
+from .lut import ShatLUT
+from .microfacet import patch_quadrature
+from .opd import opd_of_cos
+from .series import fourier_band_reflectance, series_terms
+from .spectra import DEFAULT_OBSERVER, sensitivity_ft, shat_at_zero
+
+__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_linear", "improved_bands",
+           "improved_kernel", "shift_bins", "splitsum_projection"]
+
+DEFAULT_BINS = 2
+TABLE_SHAPE = (64, 33)  # (√cos θ_o, √α) nodes, as the albedo table
+TABLE_QUADRATURE = (96, 96)  # half-vector quadrature of the table build
+ALPHA_FLOOR = 1e-4  # √α = 0 is evaluated at this α (as `prefilter.albedo_table`)
+
+
+class BinTable(NamedTuple):
+    """Equal-probability bins of c = cos θ₁ under p_R (a pytree of one array).
+
+    stats: (n_u, n_a, 2, K) on uniform grids of √cos θ_o and √α ∈ [0, 1]: [0] the offsets
+        c̄_k − cos θ_o of the bin means, [1] the bin standard deviations s_k.
+    """
+
+    stats: Array
+
+    @property
+    def bins(self) -> int:
+        return self.stats.shape[-1]
+
+    def astype(self, dtype) -> BinTable:
+        return BinTable(self.stats.astype(dtype))
+
+
+# ----------------------------------------------------------------------------- table
+def _bin_stats(theta_o, alpha, bins, quadrature, ndf):
+    """(c̄_k − cos θ_o, s_k) of `bins` equal-mass bins of c under p_R at one (θ_o, α)."""
+    q = patch_quadrature(theta_o, alpha, quadrature=quadrature, ndf=ndf)
+    order = jnp.argsort(q.cos_hi)
+    c, w = q.cos_hi[order], q.weight[order]
+    total = jnp.sum(w)
+    p = safe_div(w, total)
+    hi = jnp.cumsum(p)
+    lo = hi - p
+    edges = jnp.arange(bins + 1, dtype=c.dtype) / bins
+    e0 = edges[:-1].at[0].set(-1.0)[:, None]  # the first and last bins take every node
+    e1 = edges[1:].at[-1].set(2.0)[:, None]
+    part = jnp.clip(jnp.minimum(hi[None], e1) - jnp.maximum(lo[None], e0), 0.0, None)
+    mass = jnp.sum(part, axis=-1)
+    mean = safe_div(jnp.sum(part * c[None], axis=-1), mass)
+    var = safe_div(jnp.sum(part * (c[None] - mean[:, None]) ** 2, axis=-1), mass)
+    cos_o = jnp.cos(theta_o)
+    ok = mass > 0  # θ_o = 90°: no lobe; the bins sit at the view cosine
+    return jnp.stack([jnp.where(ok, mean - cos_o, 0.0), jnp.where(ok, jnp.sqrt(var), 0.0)])
+
+
+@functools.cache
+def _bin_table_host(shape, bins, quadrature, ndf) -> np.ndarray:
+    n_u, n_a = shape
+    u = np.linspace(0.0, 1.0, n_u)
+    sqa = np.linspace(0.0, 1.0, n_a)
+    theta = np.arccos(u**2)
+    t, a = np.meshgrid(theta, np.maximum(sqa**2, ALPHA_FLOOR), indexing="ij")
+    fn = jax.jit(jax.vmap(functools.partial(_bin_stats, bins=bins, quadrature=quadrature,
+                                            ndf=ndf)))
+    rows = [np.asarray(fn(jnp.asarray(t[i], jnp.float64), jnp.asarray(a[i], jnp.float64)))
+            for i in range(n_u)]
+    return np.stack(rows)  # (n_u, n_a, 2, K)
+
+
+def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
+              quadrature: tuple[int, int] = TABLE_QUADRATURE, ndf: str = "ggx",
+              dtype=jnp.float64) -> BinTable:
+    """The (θ_o, α) table of the bins (module docstring), built once per argument set.
+
+    Args:
+        bins: K ≥ 1 equal-probability bins of cos θ₁.
+        shape: (n_u, n_a) nodes in √cos θ_o and √α (√α = 0 is evaluated at α = 1e-4).
+        quadrature: (n_u, n_φ) of the half-vector quadrature of each node.
+        ndf: "ggx" or "beckmann".
+        dtype: float dtype of the table.
+    Cost: n_u · n_a quadratures of n_u·n_φ nodes (a few seconds on a CPU for the default).
+    Needs float64 enabled (the table is computed in float64).
+    """
+    from . import _validate as V
+
+    bins = V.check_int("bins", bins, 1)
+    shape = tuple(V.check_int(f"shape[{i}]", s, 2) for i, s in enumerate(shape))
+    quadrature = V.check_quadrature(quadrature)
+    V.check_choice("ndf", ndf, ("ggx", "beckmann"))
+    if not jax.config.jax_enable_x64:
+        raise RuntimeError("bin_table builds in float64: jax.config.update('jax_enable_x64', "
+                           "True)")
+    return BinTable(jnp.asarray(_bin_table_host(shape, bins, quadrature, ndf), dtype))
+
+
+def _bilinear(tab, x, y):
+    """tab[(x, y) ∈ [0, 1]², ...] read bilinearly on its uniform grid."""
+    def cell(v, n):
+        t = jnp.clip(v, 0.0, 1.0) * (n - 1)
+        i = jnp.clip(jnp.floor(t), 0, n - 2)
+        return i.astype(jnp.int32), t - i
+
+    n_x, n_y = tab.shape[:2]
+    i0, fx = cell(x, n_x)
+    j0, fy = cell(y, n_y)
+    extra = (1,) * (tab.ndim - 2)
+    fx, fy = fx.reshape(fx.shape + extra), fy.reshape(fy.shape + extra)
+    a0 = tab[i0, j0] * (1 - fx) + tab[i0 + 1, j0] * fx
+    a1 = tab[i0, j0 + 1] * (1 - fx) + tab[i0 + 1, j0 + 1] * fx
+    return a0 * (1 - fy) + a1 * fy
+
+
+def lookup_bins(table: BinTable, cos_o, alpha):
+    """(c̄_k (..., K), s_k (..., K)) at cos θ_o ∈ [0, 1] and α ∈ (0, 1], bilinear in
+    (√cos θ_o, √α); c̄_k = cos θ_o + tabulated offset, clamped to [0, 1]."""
+    cos_o = jnp.asarray(cos_o)
+    st = _bilinear(table.stats, safe_sqrt(cos_o), safe_sqrt(alpha))
+    return jnp.clip(cos_o[..., None] + st[..., 0, :], 0.0, 1.0), st[..., 1, :]
+
+
+# ----------------------------------------------------------------------------- environment
+def splitsum_projection(cos_o, ez_a):
+    """(μ_x⁰, σ_x⁰²) of x = ⟨ω_i, ω_o⟩ under the split-sum lobe of a constant map.
+
+    The prefiltered lobe is the normal-view lobe rotated onto ω_r (`microfacet.
+    splitsum_light_moments`): μ = a ω_r, Σ = e_t(I − ω_rω_rᵀ) + e_z ω_rω_rᵀ − μμᵀ with
+    (a, e_z) = `ez_a` = E[⟨ω_i,n⟩], E[⟨ω_i,n⟩²] at θ_o = 0 and e_t = (1 − e_z)/2. With
+    ⟨ω_o, ω_r⟩ = 2cos²θ_o − 1 =: r, μ_x⁰ = a r and σ_x⁰² = e_t(1 − r²) + e_z r² − a² r².
+    """
+    a, ez = ez_a
+    r = 2.0 * cos_o * cos_o - 1.0
+    et = (1.0 - ez) / 2.0
+    return a * r, jnp.maximum(et * (1.0 - r * r) + (ez - a * a) * r * r, 0.0)
+
+
+def shift_bins(cos_bins, std_bins, mu_x, var_x, mu_x0, var_x0):
+    """Move the uniform-light bins by the environment's change of the lobe (module docstring).
+
+    In x = 2c² − 1: x_k ↦ μ' + g (x_k − μ⁰_tab) with μ' = μ⁰_tab + (μ_x − μ_x⁰),
+    g = σ_x / σ_x⁰ (clipped to [0, 2]), where μ⁰_tab is the mean of the bins; s_k scales by g.
+    Equal to the identity when (μ_x, σ_x²) = (μ_x⁰, σ_x⁰²) (a constant map).
+    """
+    x = 2.0 * cos_bins * cos_bins - 1.0
+    xm = jnp.mean(x, axis=-1, keepdims=True)
+    g = jnp.clip(safe_div(safe_sqrt(var_x), safe_sqrt(var_x0), 1.0), 0.0, 2.0)[..., None]
+    x_new = jnp.clip(xm + (mu_x - mu_x0)[..., None] + g * (x - xm), -1.0, 1.0)
+    return safe_sqrt((1.0 + x_new) / 2.0), g * std_bins
+
+
+# ----------------------------------------------------------------------------- kernel
+def lookup_linear(lut: ShatLUT, mu, sigma) -> Array:
+    """Ŝ_j(μ, σ²) from `lut` read bilinearly in (|μ|, σ) (`lut.lookup` reads it bicubically).
+
+    Same table, symmetries and out-of-range rules as `lut.lookup` (0 beyond μ_max, σ clamped
+    at σ_max); shape broadcast(mu, sigma) + (J,), complex. C⁰ in (μ, σ): the derivative is
+    piecewise constant in the envelope (the carrier is exact).
+    """
+    n_mu = lut.table.shape[0] - 3
+    n_sig = lut.table.shape[1] - 3
+    mu, sigma = jnp.broadcast_arrays(jnp.asarray(mu), jnp.asarray(sigma))
+    a = jnp.abs(mu)
+    inside = a <= lut.mu_max
+    tm = jnp.minimum(a, lut.mu_max) / lut.mu_max * (n_mu - 1)
+    ts = jnp.minimum(sigma, lut.sigma_max) / lut.sigma_max * (n_sig - 1)
+    fm = jnp.clip(jnp.floor(tm), 0, n_mu - 2)
+    fs = jnp.clip(jnp.floor(ts), 0, n_sig - 2)
+    im, js = fm.astype(jnp.int32) + 1, fs.astype(jnp.int32) + 1  # row/column 0 is padding
+    cdt = lut.table.dtype
+    u = (tm - fm)[..., None].astype(cdt)
+    v = (ts - fs)[..., None].astype(cdt)
+    t = lut.table
+    env = ((t[im, js] * (1 - u) + t[im + 1, js] * u) * (1 - v)
+           + (t[im, js + 1] * (1 - u) + t[im + 1, js + 1] * u) * v)
+    arg = (-2.0 * jnp.pi) * a[..., None] * lut.carrier
+    val = env * jax.lax.complex(jnp.cos(arg), jnp.sin(arg))
+    val = jnp.where((mu < 0)[..., None], jnp.conj(val), val)
+    return jnp.where(inside[..., None], val, jnp.zeros((), complex_dtype(val)))
+
+
+def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
+                   terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
+                   arithmetic: str = "complex") -> Array:
+    """K 29 per bin, averaged over the K bins (module docstring): shape (..., J).
+
+    Args:
+        film: `Film`, fields broadcasting with the leading axes of `cos_bins`.
+        cos_bins: c̄_k (..., K) ∈ [0, 1], bin means of cos θ₁.
+        std_bins: s_k (..., K) ≥ 0, bin standard deviations of cos θ₁.
+        observer: band name (plain or cross-band, `uplift`).
+        terms: M Fourier orders.
+        shat: "lut" (bilinear read of `lut`), "exact" or "gaussian".
+        arithmetic: "complex" or "real" (κ₃ = 0 only) Fresnel arithmetic.
+    """
+    cos_bins = jnp.asarray(cos_bins)
+    f = Film(*(jnp.broadcast_to(jnp.asarray(x)[..., None], cos_bins.shape) for x in film))
+    d = opd_of_cos(f, cos_bins)
+    slope = safe_div((2.0 * f.thickness * f.eta_outer) ** 2 * cos_bins, d)  # D'(c)
+    sd = jnp.abs(slope) * std_bins
+    st = series_terms(f, cos_bins, arithmetic=arithmetic)
+    dtype = jnp.result_type(cos_bins, float)
+    if shat == "lut":
+        def shat_m(m):
+            return lookup_linear(lut, -m * d, m * sd)
+    else:
+        def shat_m(m):
+            return sensitivity_ft(-m * d, observer, sigma2=(m * sd) ** 2, shat=shat)
+    s0 = shat_at_zero(observer, dtype, "gaussian" if shat == "gaussian" else "exact")
+    r = fourier_band_reflectance(st, shat_m, terms, s0)  # (2, ..., K, J)
+    return jnp.mean(r, axis=(0, -2))
+
+
+def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,
+                    observer=DEFAULT_OBSERVER, terms: int = 2, shat: str = "lut",
+                    lut: ShatLUT | None = None, arithmetic: str = "complex") -> Array:
+    """Improved band reflectance under uniform light, (..., J): `lookup_bins` then
+    `improved_bands`. Multiply by A(θ_o, α) for the patch radiance.
+
+    Args:
+        film: `Film` (fields broadcast with cos_o and alpha).
+        cos_o: cos θ_o ∈ [0, 1].
+        alpha: GGX roughness α ∈ (0, 1].
+        table: `bin_table(...)` (its K is the number of bins).
+        observer, terms, shat, lut, arithmetic: as `improved_bands`.
+    """
+    cb, sb = lookup_bins(table, cos_o, alpha)
+    return improved_bands(film, cb, sb, observer, terms=terms, shat=shat, lut=lut,
+                          arithmetic=arithmetic)

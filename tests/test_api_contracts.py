@@ -20,7 +20,8 @@ def test_check_grads_patch(method):
     """d patch_radiance / d(film, θ_o, α), forward and reverse, against finite differences
     (`filtered_gt_moments` is A · K 29 with the exact filtered Ŝ, through the lobe moments)."""
     def fn(film, theta_o, alpha):
-        return tf.patch_radiance(film, theta_o, alpha, method=method, quadrature=QUAD)
+        return tf.patch_radiance(film, theta_o, alpha, method=method,
+                                 options=tf.ModelOptions(quadrature=QUAD))
 
     # jit: one compile for the finite-difference evaluations; validation skips tracers
     check_grads(jax.jit(fn), (FILM, THETA_O, ALPHA), order=1, modes=["fwd", "rev"], eps=1e-5,
@@ -30,7 +31,7 @@ def test_check_grads_patch(method):
 def test_check_grads_k29_lut():
     """K 29 (`kernels.filtered_kernel`) with the Ŝ LUT (bicubic, C¹) w.r.t. the film and the
     light-lobe moments (the exact-Ŝ K 29 is covered through `filtered_gt_moments` above)."""
-    _, mean, cov = kernels.lobe_moments(THETA_O, ALPHA, order=16)
+    _, mean, cov = kernels.lobe_moments(THETA_O, ALPHA, quadrature=(16, 16))
     wo = np.array([np.sin(THETA_O), 0.0, np.cos(THETA_O)])
     lut = build_shat_lut()
 
@@ -51,9 +52,11 @@ CALLS = {
     "rgb_reflectance[fourier,gaussian]": lambda: tf.rgb_reflectance(FILMS, COS, method="fourier",
                                                                     shat="gaussian"),
     "patch_radiance[reference]": lambda: tf.patch_radiance(FILMS, np.full(N, 0.5),
-                                                           np.full(N, 0.2), quadrature=QUAD),
+                                                           np.full(N, 0.2),
+                                                               options=tf.ModelOptions(quadrature=QUAD)),
     **{f"patch_radiance[{m},{s}]": (lambda m=m, s=s: tf.patch_radiance(
-        FILMS, np.full(N, 0.5), np.full(N, 0.2), method=m, shat=s, quadrature=QUAD))
+        FILMS, np.full(N, 0.5), np.full(N, 0.2), method=m,
+            options=tf.ModelOptions(shat=s, quadrature=QUAD)))
        for m, s in (("ideal", "exact"), ("filtered", "exact"), ("filtered_gt_moments", "lut"),
                     ("filtered_gt_moments", "gaussian"), ("filtered_gt_opd", "exact"))},
 }

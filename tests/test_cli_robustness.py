@@ -53,7 +53,7 @@ def test_version(capsys):
     (["--thickness", "-5"], "--thickness"),
     (["--thickness-max", "0"], "--thickness-max"),
     (["--terms", "-1"], "--terms"),
-    (["--quadrature", "1"], "--quadrature"),
+    (["--quadrature", "1", "8"], "--quadrature"),
     (["--exposure", "inf"], "--exposure"),
     (["--resolution", "abc"], "invalid int value"),
 ])

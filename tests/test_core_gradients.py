@@ -50,31 +50,33 @@ def _edge(dtype, mask=slice(None)):
     return film, jnp.asarray(EDGE[5][mask], dtype)
 
 
-def _public_fns(dtype, base):
+def _public_fns(dtype, arithmetic):
     lam = jnp.asarray(550.0, dtype)
     fns = {
-        "airy": lambda f, c: tf.airy_reflectance(f, c, lam, base=base),
-        "spectral": lambda f, c: tf.rgb_reflectance(f, c, base=base),
-        "fourier2": lambda f, c: tf.rgb_reflectance(f, c, method="fourier", terms=2, base=base),
-        "fourier8": lambda f, c: tf.rgb_reflectance(f, c, method="fourier", terms=8, base=base),
+        "airy": lambda f, c: tf.airy_reflectance(f, c, lam, arithmetic=arithmetic),
+        "spectral": lambda f, c: tf.rgb_reflectance(f, c, arithmetic=arithmetic),
+        "fourier2": lambda f, c: tf.rgb_reflectance(f, c, method="fourier", terms=2,
+                                                 arithmetic=arithmetic),
+        "fourier8": lambda f, c: tf.rgb_reflectance(f, c, method="fourier", terms=8,
+                                                 arithmetic=arithmetic),
     }
-    if base == "dielectric":  # the real path is also exercised in test_fresnel_airy.py
+    if arithmetic == "real":  # the real path is also exercised in test_fresnel_airy.py
         del fns["spectral"], fns["fourier8"]
     return fns
 
 
-# (base, dtype); the dielectric path in float64 is covered (finite, equal to the general path,
+# (arithmetic, dtype); the dielectric path in float64 is covered (finite, equal to the general path,
 # θ = 0 and 90° included) by test_fresnel_airy.py::test_dielectric_path_equals_general_path...
-SINGULAR_CASES = [("general", jnp.float64), ("general", jnp.float32),
-                  ("dielectric", jnp.float32)]
+SINGULAR_CASES = [("complex", jnp.float64), ("complex", jnp.float32),
+                  ("real", jnp.float32)]
 
 
-@pytest.mark.parametrize("base, dtype", SINGULAR_CASES, ids=["general-f64", "general-f32",
-                                                             "dielectric-f32"])
-def test_values_and_gradients_finite_at_singular_points(base, dtype):
-    mask = slice(None) if base == "general" else DIELECTRIC_OK
+@pytest.mark.parametrize("arithmetic, dtype", SINGULAR_CASES,
+                         ids=["complex-f64", "complex-f32", "real-f32"])
+def test_values_and_gradients_finite_at_singular_points(arithmetic, dtype):
+    mask = slice(None) if arithmetic == "complex" else DIELECTRIC_OK
     film, c = _edge(dtype, mask)
-    fns = _public_fns(dtype, base)
+    fns = _public_fns(dtype, arithmetic)
 
     @jax.jit  # one compilation for all functions and all singular points
     def values_and_grads(f, cc):
@@ -104,24 +106,25 @@ def _interior(rng, n):
     return film, rng.uniform(0.2, 0.95, n)
 
 
-CHECK_GRADS_CASES = [  # (base, function): each case compiles f, its JVP and its VJP
-    ("general", "airy"), ("general", "fourier2"), ("dielectric", "airy"),
+CHECK_GRADS_CASES = [  # (arithmetic, function): each case compiles f, its JVP and its VJP
+    ("complex", "airy"), ("complex", "fourier2"), ("real", "airy"),
 ]
 
 
-@pytest.mark.parametrize("base, fname", CHECK_GRADS_CASES)
-def test_check_grads_interior(base, fname):
+@pytest.mark.parametrize("arithmetic, fname", CHECK_GRADS_CASES)
+def test_check_grads_interior(arithmetic, fname):
     rng = np.random.default_rng(71)
     n = 4
-    kappa = np.zeros(n) if base == "dielectric" else rng.uniform(0.1, 5.0, n)
+    kappa = np.zeros(n) if arithmetic == "real" else rng.uniform(0.1, 5.0, n)
     film = tf.Film(rng.uniform(50.0, 1500.0, n), rng.uniform(1.2, 2.5, n),
                    rng.uniform(1.3, 3.0, n), kappa, np.array([1.0, 1.1, 1.0, 1.33]))
     c = rng.uniform(0.2, 0.95, n)
     lam = np.array([420.0, 510.0, 600.0, 700.0])
     fn = {
-        "airy": lambda f, cc: tf.airy_reflectance(f, cc, lam, base=base),
-        "spectral": lambda f, cc: tf.rgb_reflectance(f, cc, base=base),
-        "fourier2": lambda f, cc: tf.rgb_reflectance(f, cc, method="fourier", terms=2, base=base),
+        "airy": lambda f, cc: tf.airy_reflectance(f, cc, lam, arithmetic=arithmetic),
+        "spectral": lambda f, cc: tf.rgb_reflectance(f, cc, arithmetic=arithmetic),
+        "fourier2": lambda f, cc: tf.rgb_reflectance(f, cc, method="fourier", terms=2,
+                                                   arithmetic=arithmetic),
     }[fname]
     # jit: compiled once for the finite-difference evaluations, and the domain checks (which
     # would reject the ±eps steps at η_outer = 1) are skipped on tracers

@@ -99,8 +99,8 @@ def test_airy_matches_tmm_dielectric_path():
     eta_film, eta_base = rng.uniform(1.0, 3.0, n), rng.uniform(1.0, 4.0, n)
     d, theta, lam = rng.uniform(0, 20000, n), rng.uniform(0, np.pi / 2, n), rng.uniform(360, 830, n)
     film = tf.Film(d, eta_film, eta_base)
-    assert airy.choose_base(film) == "dielectric"
-    ours = np.asarray(tf.airy_reflectance(film, np.cos(theta), lam, base="dielectric"))
+    assert airy.choose_arithmetic(film) == "real"
+    ours = np.asarray(tf.airy_reflectance(film, np.cos(theta), lam, arithmetic="real"))
     ref = np.array([tmm_unpolarised(1.0, eta_film[i], eta_base[i], 0.0, d[i], theta[i], lam[i])
                     for i in range(n)])
     assert np.abs(ours - ref).max() <= TMM_ATOL
@@ -127,7 +127,7 @@ def test_no_film_gives_bare_interface(eta_outer):
     # same on the dielectric path where it applies (κ = 0, η₃ ≥ η₁)
     ok = (kappa == 0) & (eta_base >= eta_outer)
     film = tf.Film(0.0, 1.7, eta_base[ok], 0.0, eta_outer)
-    np.testing.assert_allclose(tf.airy_reflectance(film, c[ok], lam[ok], base="dielectric"),
+    np.testing.assert_allclose(tf.airy_reflectance(film, c[ok], lam[ok], arithmetic="real"),
                                ref[ok], rtol=0, atol=LIMIT_ATOL)
 
 
@@ -137,19 +137,19 @@ def test_bare_glass_four_percent():
         0.04, abs=1e-15)
 
 
-@pytest.mark.parametrize("base", ["dielectric", "general"])
-def test_normal_incidence_rs_equals_rp(base):
+@pytest.mark.parametrize("arithmetic", ["real", "complex"])
+def test_normal_incidence_rs_equals_rp(arithmetic):
     rng = np.random.default_rng(4)
     n = 200
-    kappa = 0.0 if base == "dielectric" else rng.uniform(0, 10, n)
+    kappa = 0.0 if arithmetic == "real" else rng.uniform(0, 10, n)
     film = tf.Film(rng.uniform(0, 20000, n), rng.uniform(1, 3, n), rng.uniform(1, 4, n), kappa)
     lam = rng.uniform(360, 830, n)
-    ifc = fresnel.film_interfaces(film, jnp.ones(n), base=base)
+    ifc = fresnel.film_interfaces(film, jnp.ones(n), arithmetic=arithmetic)
     rsp = np.asarray(airy.polarised_reflectance(ifc, film.thickness, lam))
     assert rsp.shape == (2, n)
     np.testing.assert_allclose(rsp[0], rsp[1], rtol=0, atol=LIMIT_ATOL)
     # and a non-trivial check that the s and p amplitudes differ at oblique incidence
-    ifc = fresnel.film_interfaces(film, jnp.full(n, 0.5), base=base)
+    ifc = fresnel.film_interfaces(film, jnp.full(n, 0.5), arithmetic=arithmetic)
     rsp = np.asarray(airy.polarised_reflectance(ifc, film.thickness, lam))
     assert np.abs(rsp[0] - rsp[1]).max() > 1e-2
 
@@ -165,10 +165,10 @@ def test_reflectance_in_unit_interval_big_grid():
     c[:1000] = 0.0  # grazing
     c[1000:2000] = 1.0  # normal
     lam = rng.uniform(360, 830, n)
-    r = np.asarray(tf.airy_reflectance(film, c, lam, base="general"))
+    r = np.asarray(tf.airy_reflectance(film, c, lam, arithmetic="complex"))
     assert np.all(np.isfinite(r)) and r.min() >= 0.0 and r.max() <= 1.0 + R_MAX_ROUNDING
     diel = tf.Film(film.thickness, film.eta_film, film.eta_base)
-    r = np.asarray(tf.airy_reflectance(diel, c, lam, base="dielectric"))
+    r = np.asarray(tf.airy_reflectance(diel, c, lam, arithmetic="real"))
     assert np.all(np.isfinite(r)) and r.min() >= 0.0 and r.max() <= 1.0 + R_MAX_ROUNDING
 
 
@@ -186,9 +186,9 @@ def test_dielectric_path_equals_general_path_with_gradients():
     @jax.jit  # one compilation for both paths
     def values_and_grads(f, cc):
         out = []
-        for b in ("dielectric", "general"):
+        for b in ("real", "complex"):
             # per-case values and gradients (each output depends on its own case only)
-            v, vjp = jax.vjp(lambda f, cc, b=b: tf.airy_reflectance(f, cc, lam, base=b), f, cc)
+            v, vjp = jax.vjp(lambda f, cc, b=b: tf.airy_reflectance(f, cc, lam, arithmetic=b), f, cc)
             out.append((v, vjp(jnp.ones_like(v))))
         return out
 
@@ -201,33 +201,33 @@ def test_dielectric_path_equals_general_path_with_gradients():
             continue  # the dielectric path ignores κ₃ by construction (its gradient is 0)
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-10, err_msg=name)
     # band integrals on the series path (real z on the dielectric path)
-    bd = tf.rgb_reflectance(film, c, method="fourier", terms=2, base="dielectric")
-    bg = tf.rgb_reflectance(film, c, method="fourier", terms=2, base="general")
+    bd = tf.rgb_reflectance(film, c, method="fourier", terms=2, arithmetic="real")
+    bg = tf.rgb_reflectance(film, c, method="fourier", terms=2, arithmetic="complex")
     np.testing.assert_allclose(bd, bg, rtol=0, atol=LIMIT_ATOL)
 
 
-@pytest.mark.parametrize("base", ["dielectric", "general"])
+@pytest.mark.parametrize("arithmetic", ["real", "complex"])
 @pytest.mark.parametrize("eta1, eta2", [(1.0, 1.5), (1.0, 2.4), (1.33, 1.9)])
-def test_brewster_angle_kills_p_amplitude(base, eta1, eta2):
+def test_brewster_angle_kills_p_amplitude(arithmetic, eta1, eta2):
     theta_b = np.arctan(eta2 / eta1)  # Brewster: tan θ_B = η₂/η₁
     film = tf.Film(100.0, eta2, 2.5, 0.0, eta1)
-    ifc = fresnel.film_interfaces(film, np.cos(theta_b), base=base)
+    ifc = fresnel.film_interfaces(film, np.cos(theta_b), arithmetic=arithmetic)
     rs, rp = np.asarray(ifc.r12)
     assert abs(rp) <= LIMIT_ATOL
     assert abs(rs) > 0.05  # s is still reflected
     # away from θ_B, r_p is not zero (the check can fail)
-    ifc = fresnel.film_interfaces(film, np.cos(theta_b + 0.05), base=base)
+    ifc = fresnel.film_interfaces(film, np.cos(theta_b + 0.05), arithmetic=arithmetic)
     assert abs(np.asarray(ifc.r12)[1]) > 1e-2
 
 
-@pytest.mark.parametrize("base", ["dielectric", "general"])
+@pytest.mark.parametrize("arithmetic", ["real", "complex"])
 @pytest.mark.parametrize("eta_outer, eta_base, lam", [(1.0, 2.25, 550.0), (1.0, 1.52, 450.0),
                                                       (1.33, 2.6, 700.0)])
-def test_quarter_wave_antireflection(base, eta_outer, eta_base, lam):
+def test_quarter_wave_antireflection(arithmetic, eta_outer, eta_base, lam):
     """η_film = √(η₁η₃), d = λ/(4η_film): the two reflections cancel, R(λ) = 0 at θ = 0."""
     eta_film = np.sqrt(eta_outer * eta_base)
     film = tf.Film(lam / (4.0 * eta_film), eta_film, eta_base, 0.0, eta_outer)
-    assert float(tf.airy_reflectance(film, 1.0, lam, base=base)) <= LIMIT_ATOL
+    assert float(tf.airy_reflectance(film, 1.0, lam, arithmetic=arithmetic)) <= LIMIT_ATOL
     # a 10 % thicker coating no longer cancels
     thick = film._replace(thickness=1.1 * film.thickness)
-    assert float(tf.airy_reflectance(thick, 1.0, lam, base=base)) > 1e-4
+    assert float(tf.airy_reflectance(thick, 1.0, lam, arithmetic=arithmetic)) > 1e-4

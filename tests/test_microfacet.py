@@ -75,7 +75,7 @@ def integral(q, f):
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("alpha", [0.05, 0.3, 1.0])
 def test_ndf_normalised_and_matches_textbook(kind, alpha):
-    d = jax.jit(lambda c: mf.ndf(c, alpha, kind=kind))
+    d = jax.jit(lambda c: mf.normal_distribution(c, alpha, ndf=kind))
     val, _ = integrate.quad(
         lambda t: 2 * np.pi * float(d(np.cos(t))) * np.cos(t) * np.sin(t),
         0, np.pi / 2, points=[np.arctan(alpha)], epsabs=1e-13, epsrel=1e-13, limit=200,
@@ -83,9 +83,9 @@ def test_ndf_normalised_and_matches_textbook(kind, alpha):
     assert abs(val - 1) < 1e-9
     c = np.linspace(0.05, 1, 40)
     np.testing.assert_allclose(
-        mf.ndf(c, alpha, kind=kind), textbook_d(c, alpha, kind), rtol=1e-11, atol=1e-300
+        mf.normal_distribution(c, alpha, ndf=kind), textbook_d(c, alpha, kind), rtol=1e-11, atol=1e-300
     )
-    assert float(mf.ndf(-0.3, alpha, kind=kind)) == 0.0
+    assert float(mf.normal_distribution(-0.3, alpha, ndf=kind)) == 0.0
 
 
 def _positive_projected_area(theta_o, alpha, kind):
@@ -101,7 +101,7 @@ def _positive_projected_area(theta_o, alpha, kind):
         phi0 = np.arccos(-b / a)
         return 2 * (b * phi0 + a * np.sin(phi0))
 
-    d = jax.jit(lambda c: mf.ndf(c, alpha, kind=kind))
+    d = jax.jit(lambda c: mf.normal_distribution(c, alpha, ndf=kind))
     pts = [np.arctan(alpha), np.pi / 2 - theta_o]
     val, _ = integrate.quad(
         lambda th: float(d(np.cos(th))) * np.sin(th) * ring(th),
@@ -116,7 +116,7 @@ def _positive_projected_area(theta_o, alpha, kind):
 def test_weak_white_furnace_projected_area(kind, theta_deg, alpha):
     """∫ G₁(ω_o) ⟨o,h⟩⁺ D(h) dω_h = cos θ_o: the Smith Λ is consistent with the NDF (Heitz 2014)."""
     t = theta_deg * DEG
-    g1 = float(mf.smith_g1(np.cos(t), alpha, kind=kind))
+    g1 = float(mf.smith_g1(np.cos(t), alpha, ndf=kind))
     assert abs(g1 * _positive_projected_area(t, alpha, kind) - np.cos(t)) < 1e-9
 
 
@@ -125,17 +125,17 @@ def test_lambda_g1_g2_closed_forms_and_limits(kind):
     c = np.linspace(0.02, 0.999, 50)
     alpha = 0.37
     lam = textbook_lambda(c, alpha, kind)
-    np.testing.assert_allclose(mf.smith_lambda(c, alpha, kind=kind), lam, rtol=1e-10, atol=1e-14)
-    np.testing.assert_allclose(mf.smith_g1(c, alpha, kind=kind), 1 / (1 + lam), rtol=1e-12)
+    np.testing.assert_allclose(mf.smith_lambda(c, alpha, ndf=kind), lam, rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(mf.smith_g1(c, alpha, ndf=kind), 1 / (1 + lam), rtol=1e-12)
     ci, co = np.meshgrid(c, c[::7])
     g2 = 1 / (1 + textbook_lambda(ci, alpha, kind) + textbook_lambda(co, alpha, kind))
-    np.testing.assert_allclose(mf.smith_g2(ci, co, alpha, kind=kind), g2, rtol=1e-12)
+    np.testing.assert_allclose(mf.smith_g2(ci, co, alpha, ndf=kind), g2, rtol=1e-12)
     # grazing: Λ → ∞, G → 0 (finite values and gradients), normal incidence: Λ = 0, G₁ = 1
-    assert np.isinf(float(mf.smith_lambda(0.0, alpha, kind=kind)))
-    assert float(mf.smith_g1(0.0, alpha, kind=kind)) == 0.0
-    assert float(mf.smith_g2(0.0, 0.5, alpha, kind=kind)) == 0.0
-    assert abs(float(mf.smith_g1(1.0, alpha, kind=kind)) - 1) < 1e-15
-    grads = jax.grad(lambda x, a: mf.smith_g2(x, x, a, kind=kind), argnums=(0, 1))(0.0, alpha)
+    assert np.isinf(float(mf.smith_lambda(0.0, alpha, ndf=kind)))
+    assert float(mf.smith_g1(0.0, alpha, ndf=kind)) == 0.0
+    assert float(mf.smith_g2(0.0, 0.5, alpha, ndf=kind)) == 0.0
+    assert abs(float(mf.smith_g1(1.0, alpha, ndf=kind)) - 1) < 1e-15
+    grads = jax.grad(lambda x, a: mf.smith_g2(x, x, a, ndf=kind), argnums=(0, 1))(0.0, alpha)
     assert np.all(np.isfinite(grads))
 
 
@@ -150,12 +150,12 @@ def test_brdf_textbook_reciprocity_and_horizon(kind):
 
     wi, wo = upper(200), upper(200)
     for alpha in (0.08, 0.5, 1.0):
-        r1 = np.asarray(mf.brdf_no_fresnel(wi, wo, alpha, kind=kind))
-        r2 = np.asarray(mf.brdf_no_fresnel(wo, wi, alpha, kind=kind))
+        r1 = np.asarray(mf.brdf_no_fresnel(wi, wo, alpha, ndf=kind))
+        r2 = np.asarray(mf.brdf_no_fresnel(wo, wi, alpha, ndf=kind))
         np.testing.assert_allclose(r1, r2, rtol=1e-13, atol=0)
         np.testing.assert_allclose(r1, textbook_brdf(wi, wo, alpha, kind), rtol=1e-10, atol=1e-300)
         below = wi * np.array([1, 1, -1])
-        assert np.all(np.asarray(mf.brdf_no_fresnel(below, wo, alpha, kind=kind)) == 0)
+        assert np.all(np.asarray(mf.brdf_no_fresnel(below, wo, alpha, ndf=kind)) == 0)
 
 
 # ------------------------------------------------------------------------- albedo A = L[1]
@@ -163,7 +163,7 @@ def test_brdf_textbook_reciprocity_and_horizon(kind):
 def test_albedo_bounded_and_specular_limit(kind):
     t = np.linspace(0, np.pi / 2, 10)
     a = np.array([1e-4, 1e-2, 0.1, 0.3, 0.6, 1.0])
-    A = np.asarray(mf.albedo(t[None, :], a[:, None], kind=kind))
+    A = np.asarray(mf.albedo(t[None, :], a[:, None], ndf=kind))
     assert A.shape == (6, 10)
     assert np.all(A <= 1 + 1e-12) and np.all(A > 0)
     # α → 0: perfect mirror, no masking: A → 1 for θ_o < 90° (row α = 1e-4, θ_o = 0°, 10°, …, 80°)
@@ -181,7 +181,7 @@ def test_albedo_matches_brute_force(kind, theta_deg, alpha):
     t = theta_deg * DEG
     ref, ref_coarse = brute_force(t, alpha, kind, n=400), brute_force(t, alpha, kind, n=300)
     assert abs(ref - ref_coarse) < 1e-10  # the reference itself is converged
-    assert abs(float(jnp.sum(mf.patch_quadrature(t, alpha, kind=kind).weight)) - ref) < 1e-10
+    assert abs(float(jnp.sum(mf.patch_quadrature(t, alpha, ndf=kind).weight)) - ref) < 1e-10
 
 
 def test_albedo_matches_dblquad_textbook():
@@ -194,7 +194,7 @@ def test_albedo_matches_dblquad_textbook():
 
     val, err = integrate.dblquad(integrand, 0, np.pi / 2, 0, 2 * np.pi, epsabs=1e-11, epsrel=1e-11)
     assert err < 1e-9
-    assert abs(float(jnp.sum(mf.patch_quadrature(t, alpha, kind="ggx").weight)) - val) < 1e-9
+    assert abs(float(jnp.sum(mf.patch_quadrature(t, alpha, ndf="ggx").weight)) - val) < 1e-9
 
 
 # ------------------------------------------------------------------------- convergence
@@ -203,7 +203,7 @@ def test_spectral_convergence(kind="ggx"):
     f = lambda c: jnp.cos(40 * c)  # noqa: E731  oscillatory test function
 
     def est(n):  # (L[cos 40c], L[1]) with n_u = n_phi = n
-        q = mf.patch_quadrature(t, alpha, n_u=n, n_phi=n, kind=kind)
+        q = mf.patch_quadrature(t, alpha, quadrature=(n, n), ndf=kind)
         return np.array([float(integral(q, f)), float(jnp.sum(q.weight))])
 
     ref = est(256)
@@ -222,8 +222,8 @@ def test_spectral_convergence(kind="ggx"):
 def test_quadrature_agrees_with_monte_carlo(kind, theta_deg, alpha, seed):
     t = theta_deg * DEG
     n = 200_000
-    q = mf.patch_quadrature(t, alpha, kind=kind)
-    s = mf.sample_patch_mc(jax.random.PRNGKey(seed), t, alpha, n, kind=kind)
+    q = mf.patch_quadrature(t, alpha, ndf=kind)
+    s = mf.sample_patch_mc(jax.random.PRNGKey(seed), t, alpha, n, ndf=kind)
     for f in (jnp.ones_like, lambda c: jnp.cos(40 * c), lambda c: c**2):
         per_sample = np.asarray(n * s.weight * f(s.cos_hi))
         se = per_sample.std(ddof=1) / np.sqrt(n)
@@ -236,7 +236,7 @@ def test_quadrature_agrees_with_monte_carlo(kind, theta_deg, alpha, seed):
 @pytest.mark.parametrize("theta_deg,alpha", [(0, 0.3), (40, 0.5), (75, 0.2), (89, 0.8)])
 def test_light_moments_structure(kind, theta_deg, alpha):
     t = theta_deg * DEG
-    q = mf.patch_quadrature(t, alpha, kind=kind)
+    q = mf.patch_quadrature(t, alpha, ndf=kind)
     wi = np.asarray(q.wi)
     np.testing.assert_allclose(np.linalg.norm(wi, axis=-1), 1, atol=1e-12)
     live = np.asarray(q.weight) > 0
@@ -258,7 +258,7 @@ def test_light_moments_structure(kind, theta_deg, alpha):
 @pytest.mark.parametrize("kind", KINDS)
 def test_light_moments_specular_limit(kind):
     t = 40 * DEG
-    mean, cov = mf.light_moments(mf.patch_quadrature(t, 1e-4, kind=kind))
+    mean, cov = mf.light_moments(mf.patch_quadrature(t, 1e-4, ndf=kind))
     mirror = np.array([-np.sin(t), 0, np.cos(t)])
     assert np.linalg.norm(np.asarray(mean) - mirror) < 1e-3
     assert np.abs(np.asarray(cov)).max() < 1e-6
@@ -267,8 +267,8 @@ def test_light_moments_specular_limit(kind):
 @pytest.mark.parametrize("kind", KINDS)
 def test_light_moments_agree_with_monte_carlo(kind):
     t, alpha, n = 60 * DEG, 0.4, 200_000
-    q = mf.patch_quadrature(t, alpha, kind=kind)
-    s = mf.sample_patch_mc(jax.random.PRNGKey(7), t, alpha, n, kind=kind)
+    q = mf.patch_quadrature(t, alpha, ndf=kind)
+    s = mf.sample_patch_mc(jax.random.PRNGKey(7), t, alpha, n, ndf=kind)
     mean, cov = (np.asarray(x) for x in mf.light_moments(q))
     a = float(jnp.sum(q.weight))
     w, wi = np.asarray(s.weight) * n, np.asarray(s.wi)
@@ -283,21 +283,21 @@ def test_light_moments_agree_with_monte_carlo(kind):
 @pytest.mark.parametrize("kind", KINDS)
 def test_normal_view_lobe_and_splitsum(kind):
     alphas = np.array([0.05, 0.3, 0.8])
-    a, ez = (np.asarray(x) for x in mf.lobe_moments_normal_view(alphas, kind=kind))
+    a, ez = (np.asarray(x) for x in mf.lobe_moments_normal_view(alphas, ndf=kind))
     for i, alpha in enumerate(alphas):
         a_ref, m1, m2 = brute_force(0.0, alpha, kind, n=400, moments=True)
         assert abs(a[i] - m1[2] / a_ref) < 1e-9 and abs(ez[i] - m2[2, 2] / a_ref) < 1e-9
     assert np.all(np.diff(a) < 0) and np.all(a**2 <= ez) and np.all(ez <= a)  # z ∈ [0, 1]
     # θ_o = 0: the split-sum moments are the exact patch moments
-    mean0, cov0 = mf.splitsum_light_moments(np.zeros(3), 0.3, kind=kind)
-    mq, cq = mf.light_moments(mf.patch_quadrature(0.0, 0.3, kind=kind))
+    mean0, cov0 = mf.splitsum_light_moments(np.zeros(3), 0.3, ndf=kind)
+    mq, cq = mf.light_moments(mf.patch_quadrature(0.0, 0.3, ndf=kind))
     np.testing.assert_allclose(mean0[0], mq, atol=1e-12)
     np.testing.assert_allclose(cov0[0], cq, atol=1e-12)
     # rotated lobe: μ = a ω_r, ω_r an eigenvector of Σ with eigenvalue e_z − a², E|ω|² = 1
     t = np.array([10.0, 50.0, 80.0]) * DEG
-    mean, cov = (np.asarray(x) for x in mf.splitsum_light_moments(t, 0.3, kind=kind))
+    mean, cov = (np.asarray(x) for x in mf.splitsum_light_moments(t, 0.3, ndf=kind))
     assert mean.shape == (3, 3) and cov.shape == (3, 3, 3)
-    a3, ez3 = (float(x[1]) for x in mf.lobe_moments_normal_view(alphas * 0 + 0.3, kind=kind))
+    a3, ez3 = (float(x[1]) for x in mf.lobe_moments_normal_view(alphas * 0 + 0.3, ndf=kind))
     for k in range(3):
         r = np.array([-np.sin(t[k]), 0, np.cos(t[k])])
         np.testing.assert_allclose(mean[k], a3 * r, atol=1e-14)
@@ -310,7 +310,7 @@ def _objective(kind, n=48):
     """L[cos 40c] + L[1] + ∫ρ̃ cos θ_i ω_i,x dω_i: exercises weights, cos_hi and wi."""
 
     def f(t, a):
-        q = mf.patch_quadrature(t, a, n_u=n, n_phi=n, kind=kind)
+        q = mf.patch_quadrature(t, a, quadrature=(n, n), ndf=kind)
         return jnp.sum(q.weight * (jnp.cos(40 * q.cos_hi) + 1 + q.wi[:, 0]))
 
     return f
@@ -356,11 +356,11 @@ def test_gradients_match_central_differences(kind):
 @pytest.mark.parametrize("kind", KINDS)
 def test_float32_albedo_matches_float64(kind):
     t, a = np.meshgrid(np.linspace(0, np.pi / 2, 7), [1e-4, 0.01, 0.1, 0.5, 1.0])
-    a64 = np.asarray(mf.albedo(t, a, kind=kind))
-    a32 = mf.albedo(jnp.asarray(t, jnp.float32), jnp.asarray(a, jnp.float32), kind=kind)
+    a64 = np.asarray(mf.albedo(t, a, ndf=kind))
+    a32 = mf.albedo(jnp.asarray(t, jnp.float32), jnp.asarray(a, jnp.float32), ndf=kind)
     assert a32.dtype == jnp.float32
     assert np.abs(np.asarray(a32, np.float64) - a64).max() < 1e-5
-    q = mf.patch_quadrature(jnp.float32(0.5), jnp.float32(0.3), kind=kind)
+    q = mf.patch_quadrature(jnp.float32(0.5), jnp.float32(0.3), ndf=kind)
     assert all(x.dtype == jnp.float32 for x in q)
 
 
@@ -379,6 +379,6 @@ def test_jit_vmap_and_broadcasting():
     A = mf.albedo(t[:, None], a[None, :3])
     assert A.shape == (5, 3)
     np.testing.assert_allclose(A[2, 1], jnp.sum(mf.patch_quadrature(t[2], a[1]).weight), rtol=1e-13)
-    assert mf.patch_quadrature(0.3, 0.2, n_u=8, n_phi=6).weight.shape == (48,)
+    assert mf.patch_quadrature(0.3, 0.2, quadrature=(8, 6)).weight.shape == (48,)
     with pytest.raises(ValueError):
-        mf.patch_quadrature(0.3, 0.2, kind="phong")
+        mf.patch_quadrature(0.3, 0.2, ndf="phong")

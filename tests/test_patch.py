@@ -5,7 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from thinfilm_jax import Film
+import thinfilm_jax as tf
+from thinfilm_jax import Film, ModelOptions
 from thinfilm_jax.colorimetry import bands_to_xyz, delta_e2000
 from thinfilm_jax.microfacet import albedo, light_moments, patch_quadrature
 from thinfilm_jax.opd import (opd_moments_exact, project_light_moments, taylor_opd_moments)
@@ -23,13 +24,14 @@ REFERENCE_ATOL = 1e-4
 
 @pytest.fixture(scope="module")
 def ref_converged():
-    return np.asarray(patch_radiance(FIG7, T, A, quadrature=(128, 128)))
+    return np.asarray(patch_radiance(FIG7, T, A, options=ModelOptions(quadrature=(128, 128))))
 
 
 def test_reference_converges(ref_converged):
     """Error vs quadrature order: fast (spectral) decay; the default order 48 meets 1e-4."""
     orders = [8, 16, 24, 32, 48]
-    errs = [float(np.abs(np.asarray(patch_radiance(FIG7, T, A, quadrature=(n, n)))
+    errs = [float(np.abs(np.asarray(patch_radiance(FIG7, T, A,
+                                                   options=ModelOptions(quadrature=(n, n))))
                          - ref_converged).max()) for n in orders]
     # Measured (128 as truth): 1.7e-3, 6e-5, 6e-6, 8e-7, 4e-8 — geometric decay, ≈ x0.1 per +8.
     assert all(b < a for a, b in zip(errs, errs[1:])), errs
@@ -73,7 +75,7 @@ def test_mirror_limit_all_methods_agree():
     t = np.array([0.2, 0.7, 1.0])
     ref = np.asarray(patch_radiance(FIG7, t, 1e-4))
     for m in ("ideal", "filtered_gt_moments", "filtered_gt_opd"):
-        v = np.asarray(patch_radiance(FIG7, t, 1e-4, method=m, terms=16))
+        v = np.asarray(patch_radiance(FIG7, t, 1e-4, method=m, options=ModelOptions(terms=16)))
         np.testing.assert_allclose(v, ref, atol=2e-4, err_msg=m)
 
 
@@ -94,7 +96,7 @@ def test_filtered_beats_ideal_on_rough_half():
     th = (np.arange(n) + 0.5) / n * np.pi / 2
     sa = 0.5 + (np.arange(n // 2) + 0.5) / n
     tt, ss = np.meshgrid(th, sa, indexing="ij")
-    ref = np.asarray(patch_radiance(FIG7, tt, ss**2, quadrature=(32, 32)))
+    ref = np.asarray(patch_radiance(FIG7, tt, ss**2, options=ModelOptions(quadrature=(32, 32))))
     de = {m: delta_e2000(np.asarray(patch_radiance(FIG7, tt, ss**2, method=m)), ref).mean()
           for m in ("ideal", "filtered_gt_moments", "filtered_gt_opd")}
     assert de["filtered_gt_moments"] < 0.7 * de["ideal"], de
@@ -128,7 +130,8 @@ def test_gradients_finite_every_method(method):
     """∂L/∂(film fields, α, θ_o) finite for every method, incl. θ_o = 0 and near grazing."""
     def loss(film, theta_o, alpha):
         return jnp.sum(patch_one(film, theta_o, alpha, method=method,
-                                 observer="stiles_burch_1959_10", n_u=16, n_phi=16))
+                                 observer="stiles_burch_1959_10",
+                                 options=ModelOptions(quadrature=(16, 16), arithmetic="complex")))
 
     g = jax.jit(jax.grad(loss, argnums=(0, 1, 2)))
     for theta_o, alpha in [(0.0, 0.25), (0.7, 1e-3), (1.5, 0.6), (np.pi / 2, 1.0)]:
@@ -143,9 +146,10 @@ def test_float32_reference_close_to_float64():
     t = jnp.asarray(T[:, 1:4], jnp.float32)
     a = jnp.asarray(A[:, 1:4], jnp.float32)
     for m in ("reference", "filtered_gt_moments", "ideal"):
-        v32 = np.asarray(patch_radiance(f32, t, a, method=m, quadrature=(24, 24)))
+        v32 = np.asarray(patch_radiance(f32, t, a, method=m,
+                                        options=ModelOptions(quadrature=(24, 24))))
         v64 = np.asarray(patch_radiance(FIG7, T[:, 1:4], A[:, 1:4], method=m,
-                                        quadrature=(24, 24)))
+                                        options=ModelOptions(quadrature=(24, 24))))
         assert v32.dtype == np.float32
         np.testing.assert_allclose(v32, v64, atol=2e-5, err_msg=m)
 
@@ -181,3 +185,30 @@ def test_bad_method_and_film():
         patch_radiance(FIG7, 0.3, 0.2, method="nope")
     with pytest.raises(ValueError, match="thickness"):
         patch_radiance(Film(-1.0, 1.3, 2.0), 0.3, 0.2)
+
+
+def test_bare_layer_specialisation_is_the_bare_interface():
+    """d = 0 concretely: `layer="auto"` takes the bare-interface path, which is the Fresnel
+    formula of the outer|base interface (NumPy, independent) for every band, equals the film
+    path for the reference (rounding) and is the M → ∞ limit of the real-time ones."""
+    f0 = Film(0.0, 1.3, 2.0, 0.5)
+    c = np.linspace(0.0, 1.0, 9)
+    n3 = 2.0 + 0.5j
+    ct3 = np.sqrt(1 - (1 - c**2) / n3**2 + 0j)
+    rs = (c - n3 * ct3) / (c + n3 * ct3)
+    rp = (n3 * c - ct3) / (n3 * c + ct3)
+    want = 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+    for method in ("spectral", "fourier"):
+        got = np.asarray(tf.rgb_reflectance(f0, c, method=method))
+        np.testing.assert_allclose(got, want[:, None] * np.ones(3), rtol=1e-12, atol=1e-15)
+    q = ModelOptions(quadrature=(16, 16))
+    for m in ("reference", "ideal", "filtered_gt_moments", "filtered"):
+        bare = np.asarray(patch_radiance(f0, 0.9, 0.3, method=m, options=q))
+        film = np.asarray(patch_radiance(f0, 0.9, 0.3, method=m,
+                                         options=q._replace(layer="film")))
+        tol = 1e-13 if m == "reference" else 1e-3  # real time: M = 2 truncation at d = 0
+        assert np.abs(bare - film).max() <= tol, (m, bare, film)
+    with pytest.raises(ValueError, match="layer='bare'"):
+        tf.rgb_reflectance(Film(1.0, 1.3, 2.0, 0.5), c, layer="bare")
+    with pytest.raises(ValueError, match="layer"):
+        patch_radiance(f0, 0.9, 0.3, options=ModelOptions(layer="none"))

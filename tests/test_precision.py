@@ -54,7 +54,7 @@ def test_airy_and_bands():
     assert_contractions_precise(
         lambda f, c: tf.rgb_reflectance(f, c, method="fourier", shat="gaussian", terms=3),
         FILM32, C32)
-    # concrete dielectric film (base="auto" picks the real path)
+    # concrete dielectric film (arithmetic="auto" picks the real path)
     diel = tf.Film(600.0, 1.3, 2.0).astype(F32)
     assert_contractions_precise(lambda c: tf.rgb_reflectance(diel, c, method="fourier"), C32)
 
@@ -76,14 +76,14 @@ def test_patch_radiance(method):
     shats = ("exact", "lut") if method.startswith("filtered") else ("exact",)
     for shat in shats:
         fn = lambda f, t, a, s=shat: tf.patch_radiance(  # noqa: E731
-            f, t, a, method=method, shat=s, quadrature=(6, 6))
+            f, t, a, method=method, options=tf.ModelOptions(shat=s, quadrature=(6, 6)))
         assert count_contractions(fn, FILM32, theta, alpha) >= 1
         assert_contractions_precise(fn, FILM32, theta, alpha)
 
 
 def test_microfacet_and_mc():
     t, a = jnp.asarray([0.0, 0.7], F32), jnp.asarray([0.1, 0.5], F32)
-    assert_contractions_precise(lambda t, a: tf.albedo(t, a, n_u=6, n_phi=6), t, a)
+    assert_contractions_precise(lambda t, a: tf.albedo(t, a, quadrature=(6, 6)), t, a)
     assert_contractions_precise(
         lambda k: tf.patch_radiance_mc(FILM32, F32(0.4), F32(0.3), k, n_samples=64),
         jax.random.PRNGKey(0))

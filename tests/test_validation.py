@@ -69,7 +69,7 @@ def test_not_a_film():
     (dict(method="fourier", terms=-1), "terms"),
     (dict(method="fourier", terms=2.5), "terms"),
     (dict(method="fourier", shat="lut"), "shat"),
-    (dict(base="metal"), "base"),
+    (dict(arithmetic="metal"), "arithmetic"),
 ])
 def test_bad_options(kw, words):
     with pytest.raises(ValueError, match=words):
@@ -77,8 +77,8 @@ def test_bad_options(kw, words):
 
 
 def test_bad_options_elsewhere():
-    with pytest.raises(ValueError, match="base"):
-        airy(base="metal")
+    with pytest.raises(ValueError, match="arithmetic"):
+        airy(arithmetic="metal")
     with pytest.raises(ValueError, match="observer"):
         tf.get_observer("nope")
     with pytest.raises(ValueError, match="observer"):
@@ -173,18 +173,19 @@ def test_complex_eta_base_sign_convention_and_other_complex_fields():
 
 
 def test_dielectric_base_with_absorption_is_rejected():
-    """base="dielectric" cannot represent κ₃ > 0 (it used to return 0.0889 for 0.0835)."""
+    """arithmetic='real' cannot represent κ₃ > 0 (it used to return 0.0889 for 0.0835)."""
     film = tf.Film(600.0, 1.3, 2.0, 0.5)
     for fn in (airy, rgb):
-        with pytest.raises(ValueError, match=r"base='dielectric' needs kappa_base = 0.*0\.5"):
-            fn(film=film, base="dielectric")
+        with pytest.raises(ValueError, match=r"arithmetic='real' needs kappa_base = 0.*0\.5"):
+            fn(film=film, arithmetic="real")
     with pytest.raises(ValueError, match="kappa_base = 0"):
-        tf.patch_radiance(film, 0.3, 0.3, method="ideal", base="dielectric")
+        tf.patch_radiance(film, 0.3, 0.3, method="ideal",
+                          options=tf.ModelOptions(arithmetic="real"))
     with pytest.raises(ValueError, match="kappa_base = 0"):
-        tf.series_terms(film, 0.5, base="dielectric")
+        tf.series_terms(film, 0.5, arithmetic="real")
     lossless = film._replace(kappa_base=0.0)
-    assert abs(float(airy(film=lossless, base="dielectric"))
-               - float(airy(film=lossless, base="general"))) < 1e-13
+    assert abs(float(airy(film=lossless, arithmetic="real"))
+               - float(airy(film=lossless, arithmetic="complex"))) < 1e-13
 
 
 def test_python_lists_are_arrays():
@@ -194,7 +195,7 @@ def test_python_lists_are_arrays():
     np.testing.assert_array_equal(got, ref)
     assert rgb(film=tf.Film([500.0, 600.0], 1.3, 2.0), cos_theta=[0.5, 0.6]).shape == (2, 3)
     assert tf.patch_radiance(FILM, [0.2, 0.5], 0.3, method="ideal").shape == (2, 3)
-    assert tf.albedo([0.2, 0.5], [0.3, 0.4], n_u=8, n_phi=8).shape == (2,)
+    assert tf.albedo([0.2, 0.5], [0.3, 0.4], quadrature=(8, 8)).shape == (2,)
     with pytest.raises(TypeError, match="cos_theta must be a number or a rectangular array"):
         airy(cos_theta=[0.5, [0.6, 0.7]])
     with pytest.raises(TypeError, match="film.thickness must be a number"):
@@ -233,20 +234,24 @@ def test_float32_rounding_at_the_ends_is_clamped_not_rejected():
      ValueError, "n_samples must be an int >= 2"),
     (lambda: tf.patch_radiance_mc(FILM, [0.3, 0.4], 0.3, jax.random.PRNGKey(0)),
      ValueError, "must be scalars"),
-    (lambda: tf.patch_radiance(FILM, 0.3, 0.3, quadrature=(0, 8)), ValueError, "quadrature"),
-    (lambda: tf.patch_radiance(FILM, 0.3, 0.3, quadrature=8), ValueError, "quadrature"),
+    (lambda: tf.patch_radiance(FILM, 0.3, 0.3, options=tf.ModelOptions(quadrature=(0, 8))),
+     ValueError, "quadrature"),
+    (lambda: tf.patch_radiance(FILM, 0.3, 0.3, options=tf.ModelOptions(quadrature=8)),
+     ValueError, "quadrature"),
+    (lambda: tf.patch_radiance(FILM, 0.3, 0.3, options=(2, "exact")), TypeError, "ModelOptions"),
     (lambda: tf.patch_radiance(FILM, 0.3, 0.3, batch_size=0), ValueError, "batch_size"),
-    (lambda: tf.patch_radiance(FILM, 0.3, 0.3, method="ideal", terms=np.int64(-1)),
+    (lambda: tf.patch_radiance(FILM, 0.3, 0.3, method="ideal",
+                               options=tf.ModelOptions(terms=np.int64(-1))),
      ValueError, "terms"),
-    (lambda: tf.albedo(0.3, 0.3, n_u=0), ValueError, "n_u must be an int >= 1"),
-    (lambda: tf.albedo(0.3, 0.3, n_phi=1), ValueError, "n_phi must be an int >= 2"),
-    (lambda: tf.albedo(0.3, 0.3, n_u=8.5), ValueError, "n_u must be an int"),
+    (lambda: tf.albedo(0.3, 0.3, quadrature=(0, 8)), ValueError, r"quadrature.*n_u >= 1"),
+    (lambda: tf.albedo(0.3, 0.3, quadrature=(8, 1)), ValueError, r"n_phi >= 2"),
+    (lambda: tf.albedo(0.3, 0.3, quadrature=(8.5, 8)), ValueError, "quadrature"),
     (lambda: tf.albedo(2.0, 0.3), ValueError, r"theta_o must lie in \[0.0, 1.57"),
     (lambda: tf.albedo(0.3, 0.0), ValueError, r"alpha must lie in \(0.0, 1.0\]"),
-    (lambda: tf.albedo(0.3, 0.3, kind="phong"), ValueError, "kind"),
+    (lambda: tf.albedo(0.3, 0.3, ndf="phong"), ValueError, "ndf"),
     (lambda: tf.series_terms(FILM, 1.5), ValueError, "cos_theta must lie in"),
     (lambda: tf.series_terms(FILM._replace(thickness=-1.0), 0.5), ValueError, "film.thickness"),
-    (lambda: tf.series_terms(FILM, 0.5, base="auto"), ValueError, "base"),
+    (lambda: tf.series_terms(FILM, 0.5, arithmetic="auto"), ValueError, "arithmetic"),
     (lambda: tf.taylor_opd_moments(FILM, 1.5, 0.1), ValueError, "mu_c must lie in"),
     (lambda: tf.taylor_opd_moments(FILM, 0.5, -0.1), ValueError, "var_c must lie in"),
     (lambda: tf.sensitivity_ft(np.nan), ValueError, "x must be finite"),

@@ -30,6 +30,7 @@ from .lut import ShatLUT as ShatLUT
 from .lut import build_shat_lut as build_shat_lut
 from .microfacet import albedo as albedo
 from .opd import OPDMoments as OPDMoments
+from .options import ModelOptions as ModelOptions
 from .opd import taylor_opd_moments as taylor_opd_moments
 from .patch import METHODS as PATCH_METHODS
 from .patch import patch_radiance as patch_radiance

@@ -19,6 +19,7 @@ NUMERIC = {
     "terms": (0, None, False, int),
     "quadrature": (2, None, False, int),
     "chunk": (1, None, False, int),
+    "devices": (1, None, False, int),
     "alpha": (0.0, 1.0, True, float),
     "eta_film": (1.0, None, False, float),
     "eta_base": (0.0, None, True, float),
@@ -44,17 +45,26 @@ def check_args(parser, args) -> None:
         if isinstance(choices, dict) and command in choices:
             parser = choices[command]  # errors show the sub-command's usage
     for name, (lo, hi, lo_open, kind) in NUMERIC.items():
-        v = getattr(args, name, None)
-        if v is None or command not in FOLDER_OUT:
+        vs = getattr(args, name, None)
+        if vs is None or command not in FOLDER_OUT:
             continue
-        if isinstance(v, float) and not math.isfinite(v):
-            parser.error(f"argument {_flag(name)}: must be finite, got {v}")
-        low_bad = v <= lo if lo_open else v < lo
-        if low_bad or (hi is not None and v > hi):
-            lb = "(" if lo_open else "["
-            rng = f"{lb}{lo}, {'inf)' if hi is None else f'{hi}]'}"
-            what = "an integer" if kind is int else "a number"
-            parser.error(f"argument {_flag(name)}: must be {what} in {rng}, got {v}")
+        for v in vs if isinstance(vs, list) else (vs,):
+            _check_value(parser, name, v, lo, hi, lo_open, kind)
+    _check_out(parser, command, args)
+
+
+def _check_value(parser, name, v, lo, hi, lo_open, kind) -> None:
+    if isinstance(v, float) and not math.isfinite(v):
+        parser.error(f"argument {_flag(name)}: must be finite, got {v}")
+    low_bad = v <= lo if lo_open else v < lo
+    if low_bad or (hi is not None and v > hi):
+        lb = "(" if lo_open else "["
+        rng = f"{lb}{lo}, {'inf)' if hi is None else f'{hi}]'}"
+        what = "an integer" if kind is int else "a number"
+        parser.error(f"argument {_flag(name)}: must be {what} in {rng}, got {v}")
+
+
+def _check_out(parser, command, args) -> None:
     out = getattr(args, "out", None)
     if command in FOLDER_OUT and out is not None:
         p = Path(out)

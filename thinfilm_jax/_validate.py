@@ -244,3 +244,16 @@ def check_int(name: str, value, lo: int = 0) -> int:
 def check_choice(name: str, value, choices) -> None:
     if not isinstance(value, str) or value not in choices:
         raise ValueError(f"unknown {name} {value!r}; expected one of {sorted(choices)}")
+
+
+def check_quadrature(value, name: str = "quadrature") -> tuple[int, int]:
+    """A half-vector quadrature order pair (n_u ≥ 1, n_phi ≥ 2) as plain ints.
+
+    The one spelling of a quadrature order across the library (`microfacet.patch_quadrature`,
+    `patch_radiance`, `fit_film`, the Figure 7 driver)."""
+    try:
+        n_u, n_phi = value
+        return check_int(f"{name}[0] (n_u)", n_u, 1), check_int(f"{name}[1] (n_phi)", n_phi, 2)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name} must be a pair (n_u >= 1, n_phi >= 2) of ints, got "
+                         f"{value!r}") from e

@@ -23,38 +23,38 @@ from .film import Film
 from .fresnel import Interfaces, film_interfaces
 
 
-def choose_base(film: Film, base: str = "auto") -> str:
-    """Resolve ``base="auto"``: the real dielectric path when the (concrete) film allows it.
+def choose_arithmetic(film: Film, arithmetic: str = "auto") -> str:
+    """Resolve ``arithmetic="auto"``: the real dielectric path when the (concrete) film allows it.
 
     The dielectric path needs κ₃ = 0, η₂ ≥ η₁ and η₃ ≥ η₁ (no TIR). With traced fields
     (inside `jit`) "auto" cannot look at the values and takes the general path; pass
-    ``base="dielectric"`` explicitly to specialise a jitted dielectric scene.
-    ``base="dielectric"`` with a concrete κ₃ > 0 (or a complex η₃) raises a ValueError: the
+    ``arithmetic="real"`` explicitly to specialise a jitted dielectric scene.
+    ``arithmetic="real"`` with a concrete κ₃ > 0 (or a complex η₃) raises a ValueError: the
     real path cannot represent absorption. With a traced κ₃ it is not checked (the
     dielectric path reads η₃ only, so κ₃ is ignored there).
     """
     import numpy as np
 
-    V.check_choice("base", base, ("auto", "dielectric", "general"))
-    if base == "dielectric":
+    V.check_choice("arithmetic", arithmetic, ("auto", "real", "complex"))
+    if arithmetic == "real":
         if jnp.iscomplexobj(film.eta_base):
-            raise ValueError("base='dielectric' cannot represent a complex eta_base; use "
-                             "base='general' or 'auto'")
+            raise ValueError("arithmetic='real' cannot represent a complex eta_base; use "
+                             "arithmetic='complex' or 'auto'")
         if V.is_concrete(film.kappa_base) and np.any(np.asarray(film.kappa_base) != 0):
-            raise ValueError(f"base='dielectric' needs kappa_base = 0 (real arithmetic, no "
+            raise ValueError(f"arithmetic='real' needs kappa_base = 0 (real arithmetic, no "
                              f"absorption); got kappa_base = "
                              f"{float(np.max(np.asarray(film.kappa_base)))!r}: use "
-                             f"base='general' or 'auto'")
-    if base != "auto":
-        return base
+                             f"arithmetic='complex' or 'auto'")
+    if arithmetic != "auto":
+        return arithmetic
     if not all(V.is_concrete(x) for x in film) or any(jnp.iscomplexobj(x) for x in film):
-        return "general"
+        return "complex"
 
     k, e1, e2, e3 = (np.asarray(x) for x in (film.kappa_base, film.eta_outer, film.eta_film,
                                              film.eta_base))
     if np.all(k == 0) and np.all(e2 >= e1) and np.all(e3 >= e1):
-        return "dielectric"
-    return "general"
+        return "real"
+    return "complex"
 
 
 def polarised_reflectance(ifc: Interfaces, thickness, wavelength) -> Array:
@@ -96,7 +96,7 @@ def polarised_reflectance(ifc: Interfaces, thickness, wavelength) -> Array:
     return jnp.where(zero, 1.0, num / jnp.where(zero, 1.0, den))
 
 
-def airy_reflectance(film: Film, cos_theta, wavelength, *, base: str = "auto") -> Array:
+def airy_reflectance(film: Film, cos_theta, wavelength, *, arithmetic: str = "auto") -> Array:
     """Unpolarised reflectance R(θ₁, λ) of `film` (SPEC §2, exact).
 
     Args:
@@ -105,7 +105,7 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, base: str = "auto") -
         cos_theta: cos θ₁ ∈ [0, 1] in the outer medium (excursions of a few ulps, e.g.
             float32 cos(π/2) = −4.4e-8, are clamped).
         wavelength: λ in nm (> 0).
-        base: "auto" | "dielectric" | "general" (see `choose_base`; "dielectric" with
+        arithmetic: "auto" | "real" | "complex" (see `choose_arithmetic`; "real" with
             κ₃ > 0 raises).
 
     Returns:
@@ -120,16 +120,16 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, base: str = "auto") -
     wavelength = V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
     V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta),
                        ("wavelength", wavelength)])
-    return _airy_jit(film, cos_theta, wavelength, choose_base(film, base))
+    return _airy_jit(film, cos_theta, wavelength, choose_arithmetic(film, arithmetic))
 
 
-@functools.partial(jax.jit, static_argnames="base")
-def _airy_jit(film, cos_theta, wavelength, base):
+@functools.partial(jax.jit, static_argnames="arithmetic")
+def _airy_jit(film, cos_theta, wavelength, arithmetic):
     # Fresnel terms depend on (film, θ) only: form them on that shape, then broadcast to λ.
     film, cos_theta = broadcast_all(film, cos_theta)
     shape = jnp.broadcast_shapes(cos_theta.shape, jnp.shape(wavelength))
     pad = (1,) * (len(shape) - cos_theta.ndim)
-    ifc = film_interfaces(film, cos_theta, base=base)
+    ifc = film_interfaces(film, cos_theta, arithmetic=arithmetic)
     ifc = Interfaces(*(x.reshape(*x.shape[:x.ndim - cos_theta.ndim], *pad, *cos_theta.shape)
                        for x in ifc))
     d = jnp.reshape(film.thickness, pad + cos_theta.shape)

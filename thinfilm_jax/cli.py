@@ -14,13 +14,36 @@ def _enable_x64():
     jax.config.update("jax_enable_x64", True)
 
 
+def _devices(args):
+    """``--distributed`` joins a multi-host run first (`jax.distributed`); ``--devices`` k is
+    then checked against the devices there (ValueError naming it: exit status 1)."""
+    from .sharding import batch_mesh, initialize_distributed
+
+    if getattr(args, "distributed", False):
+        initialize_distributed()
+    batch_mesh(args.devices)
+    return args.devices
+
+
+def _add_device_options(sub) -> None:
+    sub.add_argument("--devices", type=int, help="split the work across the first K devices "
+                     "(default: every device; CPU: XLA_FLAGS=--xla_force_host_platform_"
+                     "device_count=K makes K host devices)", metavar="K")
+    sub.add_argument("--distributed", action="store_true",
+                     help="several hosts: call jax.distributed.initialize() first (SLURM, "
+                          "Open MPI or JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, "
+                          "JAX_PROCESS_ID); process 0 writes the files")
+
+
 def _figure7(args) -> int:
+    devices = _devices(args)
     _enable_x64()
     from .studies.figure7 import Figure7Config, run_figure7
 
     fields = {f.name for f in dataclasses.fields(Figure7Config)}
-    cfg = Figure7Config(**{k: v for k, v in vars(args).items() if k in fields and v is not None})
-    summary = run_figure7(cfg, out_dir=args.out, progress=not args.quiet)
+    cfg = Figure7Config(**{k: tuple(v) if isinstance(v, list) else v
+                           for k, v in vars(args).items() if k in fields and v is not None})
+    summary = run_figure7(cfg, out_dir=args.out, progress=not args.quiet, devices=devices)
     print(f"wrote {args.out}/figure7.png, figure7_error.png, figure7.json, figure7.npz "
           f"in {summary['compute_seconds']:.1f} s")
     print(f"{'row/method':40s} {'ΔE mean':>8s} {'ΔE p95':>8s} {'ΔE max':>8s}")
@@ -43,6 +66,7 @@ def _bench(args) -> int:
 
 
 def _render(args) -> int:
+    devices = _devices(args)
     _enable_x64()
     from .studies.render import RenderConfig, run_render
 
@@ -52,7 +76,7 @@ def _render(args) -> int:
         raise ValueError(f"--alphas must lie in (0, 1], got {args.alphas}")
     cfg = RenderConfig(resolution=args.resolution, exposure=args.exposure,
                        observer=args.observer, **kw)
-    summary = run_render(cfg, out_dir=args.out, progress=not args.quiet)
+    summary = run_render(cfg, out_dir=args.out, progress=not args.quiet, devices=devices)
     print(f"wrote {args.out}/ibl_{{{','.join(cfg.scenes)}}}.png, ibl_render.json, ibl_render.npz")
     print(f"{'render':44s} {'method':9s} {'pts/s':>9s} {'ΔE mean':>8s} {'ΔE p95':>8s}")
     for r in summary["renders"]:
@@ -92,11 +116,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="largest thickness of row (e)-(h), nm (1000)")
     f7.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"])
     f7.add_argument("--terms", type=int, help="Fourier orders M of the real-time methods (2)")
-    f7.add_argument("--quadrature", type=int, help="half-vector quadrature order per axis (32)")
+    f7.add_argument("--quadrature", type=int, nargs=2, metavar=("N_U", "N_PHI"),
+                    help="half-vector quadrature orders (n_u, n_phi) (32 32)")
     f7.add_argument("--shat", choices=["exact", "lut", "gaussian"],
                     help="filtered Ŝ source of K 29 (exact)")
     f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")
     f7.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_device_options(f7)
     f7.set_defaults(func=_figure7)
 
     b = sub.add_parser("bench", help="error against run time of every method and peers",
@@ -135,6 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
                     default="stiles_burch_1959_10")
     rd.add_argument("--out", default="figures", help="output folder (default: figures)")
     rd.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_device_options(rd)
     rd.set_defaults(func=_render)
 
     from . import fit_cli

@@ -24,9 +24,9 @@ SHAT_SOURCES = ("exact", "lut", "gaussian")
 
 def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, terms: int = 2,
                    shat: str = "exact", lut: ShatLUT | None = None,
-                   base: str = "general") -> Array:
+                   arithmetic: str = "complex") -> Array:
     """K 29 band reflectance (..., J) for broadcast inputs (no validation; see patch.py)."""
-    st = series_terms(film, cos_mean, base=base)
+    st = series_terms(film, cos_mean, arithmetic=arithmetic)
     dtype = jnp.result_type(cos_mean, float)
     mean, std = opd
     if shat == "lut":

@@ -11,9 +11,9 @@ $$ r^s_{ab} = \frac{q_a - q_b}{q_a + q_b}, \qquad
 
 Two arithmetic paths, chosen statically ("a scene pays only for what it needs"):
 
-* ``base="dielectric"``: real arithmetic. Valid when κ₃ = 0 and there is no total
+* ``arithmetic="real"``: real arithmetic. Valid when κ₃ = 0 and there is no total
   internal reflection anywhere (η₂ ≥ η₁ and η₃ ≥ η₁); amplitudes are real and signed.
-* ``base="general"``: complex arithmetic; absorbing bases (κ₃ > 0), TIR at either
+* ``arithmetic="complex"``: complex arithmetic; absorbing bases (κ₃ > 0), TIR at either
   interface (η₁ > η₂ or η₁ > η₃) and evanescent films.
 
 Singular points are guarded with the double-where pattern so that values *and*
@@ -32,7 +32,7 @@ from jax import Array
 
 from .film import Film
 
-BASES = ("dielectric", "general")
+ARITHMETIC = ("real", "complex")
 
 
 def safe_sqrt(x: Array) -> Array:
@@ -91,23 +91,23 @@ class Interfaces(NamedTuple):
     q2: Array  # η₂ cos θ₂ (real on the dielectric path)
 
 
-def film_interfaces(film: Film, cos_theta, *, base: str = "general") -> Interfaces:
+def film_interfaces(film: Film, cos_theta, *, arithmetic: str = "complex") -> Interfaces:
     """Fresnel amplitudes r₁₂, r₂₃ and the film's normal wavenumber q₂ at cos θ₁.
 
     Args:
         film: the film (fields broadcast with `cos_theta`).
         cos_theta: cos θ₁ in [0, 1], angle of incidence in the outer medium.
-        base: "dielectric" (real arithmetic, no TIR, κ₃ ignored) or "general".
+        arithmetic: "real" (real arithmetic, no TIR, κ₃ ignored) or "complex".
     """
     eta1, eta2, eta3, kappa3 = film.eta_outer, film.eta_film, film.eta_base, film.kappa_base
     c = jnp.asarray(cos_theta)
     s2 = sin2_outer(eta1, c)
     q1 = eta1 * c
-    if base == "dielectric":
+    if arithmetic == "real":
         q2 = safe_sqrt(eta2**2 - s2)
         q3 = safe_sqrt(eta3**2 - s2)
         eps3 = eta3**2
-    elif base == "general":
+    elif arithmetic == "complex":
         # explicit real → complex casts (no implicit promotion: works under "strict")
         cdt = complex_dtype(c, eta1, eta2, eta3, kappa3)
         n3 = jnp.asarray(eta3, cdt) + 1j * jnp.asarray(kappa3, cdt)
@@ -116,9 +116,9 @@ def film_interfaces(film: Film, cos_theta, *, base: str = "general") -> Interfac
         q3 = sqrt_upper(eps3 - jnp.asarray(s2, cdt))
         q1 = jnp.asarray(q1, cdt)
     else:
-        raise ValueError(f"unknown base {base!r}; expected one of {BASES}")
+        raise ValueError(f"unknown arithmetic {arithmetic!r}; expected one of {ARITHMETIC}")
     eps1, eps2 = eta1**2, eta2**2
-    if base == "general":
+    if arithmetic == "complex":
         eps1, eps2 = jnp.asarray(eps1, cdt), jnp.asarray(eps2, cdt)
     r12 = interface_amplitudes(q1, q2, eps1, eps2)
     r23 = interface_amplitudes(q2, q3, eps2, eps3)

@@ -33,13 +33,13 @@ import numpy as np
 from jax import Array
 
 from . import _validate as V
-from .airy import choose_base
+from .airy import choose_arithmetic
 from .envmap import EnvMap, _row_geometry, load_envmap, lookup_nearest
 from .film import Film
-from .filtered import SHAT_SOURCES
 from .kernels import filtered_kernel, ideal_kernel
 from .lut import build_shat_lut
-from .microfacet import ndf, smith_g1, smith_g2
+from .microfacet import normal_distribution, smith_g1, smith_g2
+from .options import ModelOptions, check_options
 from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered,
                         moments_to_mean_cov, prefilter_envmap)
 from .reflectance import spectral_bands
@@ -47,15 +47,16 @@ from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .uplift import cross_band_name
 
 METHODS = ("reference", "mc", "ideal", "filtered")
+REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST
 
 
 # ----------------------------------------------------------------------------- public
 def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "reference",
-                    observer: str = DEFAULT_OBSERVER, terms: int = 2, shat: str = "lut",
+                    observer: str = DEFAULT_OBSERVER, options: ModelOptions = REALTIME_OPTIONS,
                     cross_band: bool = True, subdivisions: int | None = None,
                     n_cos: int = 1024, n_samples: int = 4096, key=None,
-                    batch_size: int | None = None, base: str = "auto") -> Array:
+                    batch_size: int | None = None) -> Array:
     """Band radiances L_j (..., J) of a film under an environment map (SPEC §9).
 
     Args:
@@ -66,22 +67,30 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
             or `PrefilteredEnvMap` (real-time methods only; build it once).
         method: "reference" | "mc" | "ideal" | "filtered".
         observer: colour bands.
-        terms: Fourier orders M of the real-time methods.
-        shat: filtered Ŝ source of K 29: "lut" (the map's table), "exact" or "gaussian".
+        options: `ModelOptions` (default `REALTIME_OPTIONS`: shat="lut", the map's table):
+            terms = Fourier orders M and shat = Ŝ source of the real-time methods,
+            arithmetic ("auto" specialises a concrete dielectric film); ndf must be "ggx"
+            (the prefiltered maps are GGX); quadrature does not apply.
         cross_band: True: R_jk under RGB light (SPEC §9); False: the diagonal approximation.
         subdivisions: s Gauss nodes per axis inside each texel (reference); None = auto.
         n_cos: nodes of the reference's R_jk(cos θ₁) table.
         n_samples, key: Monte Carlo sample count and PRNG key (default key 0).
         batch_size: shading points evaluated together (default: 65536 for the real-time
             methods, about 2¹⁹ quadrature nodes' worth for the exact ones).
-        base: "auto" | "general" | "dielectric" Fresnel arithmetic.
     Shading points with ⟨n, ω_o⟩ ≤ 0 give 0.
     """
     V.check_film(film)
     V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
     V.check_choice("method", method, METHODS)
     V.check_choice("observer", observer, OBSERVERS)
-    V.check_choice("shat", shat, SHAT_SOURCES)
+    options = check_options(options)
+    if options.ndf != "ggx":
+        raise ValueError(f"envmap_radiance supports ndf='ggx' only (the prefiltered maps and "
+                         f"the reference's lobe are GGX), got ndf={options.ndf!r}")
+    if options.layer == "bare":
+        raise ValueError("envmap_radiance has no bare-interface path (ModelOptions.layer): "
+                         "use layer='auto' or 'film'")
+    terms, shat = options.terms, options.shat
     for name, v in (("normal", normal), ("view", view)):
         if np.shape(v)[-1:] != (3,):
             raise ValueError(f"{name} must have shape (..., 3), got {np.shape(v)}")
@@ -94,9 +103,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     shape = V.check_broadcast([("film", np.zeros(film.shape)), ("alpha", alpha),
                                ("normal", np.zeros(np.shape(normal)[:-1])),
                                ("view", np.zeros(np.shape(view)[:-1]))])
-    if not (isinstance(terms, int) and terms >= 0):
-        raise ValueError(f"terms must be a non-negative int, got {terms!r}")
-    base = choose_base(film, base)
+    arithmetic = choose_arithmetic(film, options.arithmetic)
     realtime = method in ("ideal", "filtered")
     if isinstance(envmap, PrefilteredEnvMap):
         if not realtime:
@@ -113,7 +120,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     if realtime:
         if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
             raise ValueError("the PrefilteredEnvMap was built for another observer")
-        cfg = (method, observer, terms, shat, bool(cross_band), base)
+        cfg = (method, observer, terms, shat, bool(cross_band), arithmetic)
         return _realtime_jit(Film(*args[:5]), args[5], *nv, pref, cfg,
                              int(batch_size or 65536))
     n_pts = int(np.prod(shape))
@@ -126,13 +133,13 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         d, wt, idx = texel_nodes(*env.shape, subdivisions)
         rad = env.radiance.astype(dtype).reshape(-1, 3)
         nodes = (jnp.asarray(d, dtype), jnp.asarray(wt, dtype)[:, None] * rad[idx])
-        cfg = ("reference", observer, subdivisions, int(n_cos), bool(cross_band), base,
+        cfg = ("reference", observer, subdivisions, int(n_cos), bool(cross_band), arithmetic,
                _batch(batch_size, n_pts, len(wt)), film.shape == ())
         return _exact_jit(Film(*args[:5]), args[5], *nv, env.radiance.astype(dtype), nodes, cfg)
     if not (isinstance(n_samples, int) and n_samples >= 1):
         raise ValueError(f"n_samples must be a positive int, got {n_samples!r}")
     key = jax.random.key(0) if key is None else key
-    cfg = ("mc", observer, int(n_samples), 0, bool(cross_band), base,
+    cfg = ("mc", observer, int(n_samples), 0, bool(cross_band), arithmetic,
            _batch(batch_size, n_pts, n_samples * 64), False)
     return _exact_jit(Film(*args[:5]), args[5], *nv, env.radiance.astype(dtype), key, cfg)
 
@@ -169,7 +176,7 @@ def _realtime_jit(film, alpha, normal, view, pref, cfg, chunk):
 
 
 def _realtime_points(film, alpha, normal, view, pref, cfg):
-    method, observer, terms, shat, cross, base = cfg
+    method, observer, terms, shat, cross, arithmetic = cfg
     cos_o = jnp.sum(normal * view, axis=-1)
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
@@ -182,17 +189,18 @@ def _realtime_points(film, alpha, normal, view, pref, cfg):
     if shat == "lut" and not cross:  # the diagonal path reads the plain bands' table
         lut = build_shat_lut(observer, dtype=alpha.dtype)
     if method == "ideal":
-        r = ideal_kernel(film, co, observer=obs, terms=terms, shat=shat, lut=lut, base=base)
+        r = ideal_kernel(film, co, observer=obs, terms=terms, shat=shat, lut=lut,
+                         arithmetic=arithmetic)
     else:
         if pref.per_channel:  # moments of channel k drive R_jk (..., 3[k], 9)
             mean, cov = moments_to_mean_cov(mom)
             f3 = Film(*(jnp.asarray(x)[..., None] for x in film))
             r = filtered_kernel(f3, view[..., None, :], mean, cov, observer=obs, terms=terms,
-                                shat=shat, lut=lut, base=base)
+                                shat=shat, lut=lut, arithmetic=arithmetic)
         else:
             mean, cov = moments_to_mean_cov(mom)
             r = filtered_kernel(film, view, mean, cov, observer=obs, terms=terms, shat=shat,
-                                lut=lut, base=base)
+                                lut=lut, arithmetic=arithmetic)
     if cross:
         r = r.reshape(r.shape[:-1] + (3, 3))  # (..., [k,] j, k)
         if r.ndim > rad.ndim + 1:  # per-channel moments: keep k of the moments = k of R
@@ -249,15 +257,15 @@ def _lobe_cos_weight(wi, n, wo, alpha):
     c = jnp.sum(hs * wi, -1) / hn
     cis = jnp.where(up, ci, 1.0)
     cos_ = jnp.where(up, co, 1.0)
-    f = ndf(ch, alpha) * smith_g2(cis, cos_, alpha) / (4 * cos_)
+    f = normal_distribution(ch, alpha) * smith_g2(cis, cos_, alpha) / (4 * cos_)
     return jnp.where(up, f, 0.0), jnp.clip(c, 0.0, 1.0)
 
 
-def _r_table(film, observer, n_cos, base, dtype):
+def _r_table(film, observer, n_cos, arithmetic, dtype):
     """R_jk (or R_j) at c = linspace(0, 1, n_cos): exact spectral bands."""
     c = jnp.linspace(0.0, 1.0, n_cos, dtype=dtype)
     return spectral_bands(Film(*(jnp.asarray(x)[..., None] for x in film)), c, observer,
-                          base=base)
+                          arithmetic=arithmetic)
 
 
 def _interp(table, c):
@@ -294,7 +302,7 @@ def _vndf_sample(u1, u2, wo_l, alpha):
 @functools.partial(jax.jit, static_argnums=(6,))
 def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
     """extra: (node directions, node weight × radiance) for the reference, a key for MC."""
-    method, observer, s, n_cos, cross, base, batch, one_film = cfg
+    method, observer, s, n_cos, cross, arithmetic, batch, one_film = cfg
     dtype = alpha.dtype
     obs = cross_band_name(observer) if cross else observer
     shape = alpha.shape
@@ -303,7 +311,7 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
     if method == "reference":
         dirs, e = extra
         # one film for every shading point: its R_jk(cos θ₁) table is built once, not per point
-        shared_table = (_r_table(Film(*(x[0] for x in flat[:5])), obs, n_cos, base, dtype)
+        shared_table = (_r_table(Film(*(x[0] for x in flat[:5])), obs, n_cos, arithmetic, dtype)
                         if one_film else None)
     else:
         keys = jax.random.split(extra, n_pts)
@@ -313,7 +321,7 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
         a, n, wo = xs[5], xs[6], xs[7]
         if method == "reference":
             wgt, c = _lobe_cos_weight(dirs, n, wo, a)  # (N,)
-            table = shared_table if one_film else _r_table(f, obs, n_cos, base, dtype)
+            table = shared_table if one_film else _r_table(f, obs, n_cos, arithmetic, dtype)
             r = _interp(table, c)  # (N, J[·3])
             light = wgt[:, None] * e  # (N, 3)
         else:
@@ -331,7 +339,8 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
             g = smith_g2(jnp.where(ok, ci, 1.0), jnp.where(ok, co, 1.0), a) / smith_g1(
                 jnp.where(ok, co, 1.0), a)
             wgt = jnp.where(ok, g, 0.0) / s
-            r = spectral_bands(Film(*(jnp.asarray(x)[..., None] for x in f)), c, obs, base=base)
+            r = spectral_bands(Film(*(jnp.asarray(x)[..., None] for x in f)), c, obs,
+                               arithmetic=arithmetic)
             light = wgt[:, None] * lookup_nearest(radiance, wi)
         if cross:
             r = r.reshape(r.shape[:-1] + (-1, 3))  # (N, j, k)

@@ -30,7 +30,7 @@ from jax import Array
 from .film import Film
 from .filtered import filtered_bands
 from .lut import ShatLUT
-from .microfacet import light_moments, patch_quadrature
+from .microfacet import DEFAULT_QUADRATURE, light_moments, patch_quadrature
 from .opd import (OPDMoments, cos_incidence_from_projection, opd_of_cos, project_light_moments,
                   taylor_opd_moments)
 from .reflectance import fourier_bands
@@ -41,7 +41,7 @@ __all__ = ["ideal_kernel", "filtered_kernel", "lobe_moments"]
 
 def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2,
                  shat: str = "exact", lut: ShatLUT | None = None,
-                 base: str = "general") -> Array:
+                 arithmetic: str = "complex") -> Array:
     """R_j(cos θ_o) by K 4 with M = `terms`, shape broadcast(film, cos_o) + (J,).
 
     Args:
@@ -52,18 +52,18 @@ def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2
         shat: Ŝ source, as for `filtered_kernel`: "exact" (quadrature on the observer's
             samples), "lut" (the Ŝ(μ, σ²) table read at σ = 0: K 29 with σ_D = 0) or
             "gaussian" (BB17's closed form).
-        base: "general" (complex η₃ + iκ₃) or "dielectric" (κ₃ = 0 only).
+        arithmetic: "complex" (complex η₃ + iκ₃) or "real" (κ₃ = 0 only).
     """
     if shat == "lut":
         opd = OPDMoments(opd_of_cos(film, cos_o), jnp.zeros_like(jnp.asarray(cos_o)))
         return filtered_bands(film, cos_o, opd, observer, terms=terms, shat="lut", lut=lut,
-                              base=base)
-    return fourier_bands(film, cos_o, observer, terms=terms, shat=shat, base=base)
+                              arithmetic=arithmetic)
+    return fourier_bands(film, cos_o, observer, terms=terms, shat=shat, arithmetic=arithmetic)
 
 
 def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, terms: int = 2,
                     shat: str = "lut", lut: ShatLUT | None = None,
-                    base: str = "general") -> Array:
+                    arithmetic: str = "complex") -> Array:
     """K 29 band reflectance from light-direction moments, shape (..., J).
 
     Args:
@@ -77,21 +77,23 @@ def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, ter
     opd = taylor_opd_moments(film, mu_c, var_c)
     cos_star = cos_incidence_from_projection(mu_c)
     return filtered_bands(film, cos_star, opd, observer, terms=terms, shat=shat, lut=lut,
-                          base=base)
+                          arithmetic=arithmetic)
 
 
-@functools.partial(jax.jit, static_argnames=("order", "ndf"))
-def lobe_moments(theta_o, alpha, *, order: int = 48, ndf: str = "ggx"):
+@functools.partial(jax.jit, static_argnames=("quadrature", "ndf"))
+def lobe_moments(theta_o, alpha, *, quadrature: tuple[int, int] = DEFAULT_QUADRATURE,
+                 ndf: str = "ggx"):
     """(A, μ_ω, Σ_ω) of p_R for broadcast θ_o, α: shapes (...), (..., 3), (..., 3, 3).
 
-    Frame n = z, ω_o = (sin θ_o, 0, cos θ_o); quadrature order `order` per axis (K 12, 20, 21).
+    Frame n = z, ω_o = (sin θ_o, 0, cos θ_o); `quadrature` = (n_u, n_φ) of the half-vector
+    quadrature (K 12, 20, 21).
     """
     dt = jnp.result_type(theta_o, alpha, float)
     theta_o, alpha = jnp.broadcast_arrays(jnp.asarray(theta_o, dt), jnp.asarray(alpha, dt))
     shape = theta_o.shape
 
     def one(t, a):
-        q = patch_quadrature(t, a, n_u=order, n_phi=order, kind=ndf)
+        q = patch_quadrature(t, a, quadrature=quadrature, ndf=ndf)
         m, c = light_moments(q)
         return jnp.sum(q.weight), m, c
 

@@ -67,7 +67,9 @@ from jax.scipy.special import erfc
 
 __all__ = [
     "PatchQuadrature",
-    "ndf",
+    "normal_distribution",
+    "DEFAULT_QUADRATURE",
+    "NDFS",
     "smith_lambda",
     "smith_g1",
     "smith_g2",
@@ -80,7 +82,8 @@ __all__ = [
     "sample_patch_mc",
 ]
 
-_KINDS = ("ggx", "beckmann")
+NDFS = ("ggx", "beckmann")
+DEFAULT_QUADRATURE = (48, 48)  # (n_u, n_phi) of `patch_quadrature`: converged to ~1e-12 (tests)
 _INV_SQRT_PI = float(1.0 / np.sqrt(np.pi))  # Python float: weakly typed under strict promotion
 
 
@@ -95,16 +98,16 @@ class PatchQuadrature(NamedTuple):
 
 
 # ----------------------------------------------------------------------------- helpers
-def _check_kind(kind):
-    if not isinstance(kind, str) or kind not in _KINDS:
-        raise ValueError(f"kind must be one of {_KINDS}, got {kind!r}")
+def _check_ndf(ndf):
+    if not isinstance(ndf, str) or ndf not in NDFS:
+        raise ValueError(f"ndf must be one of {NDFS}, got {ndf!r}")
 
 
-def _check_orders(n_u, n_phi):
+def _check_orders(quadrature):
     """Quadrature orders as plain ints: n_u >= 1, n_phi >= 2 (ValueError naming them)."""
     from . import _validate as V
 
-    return V.check_int("n_u", n_u, 1), V.check_int("n_phi", n_phi, 2)
+    return V.check_quadrature(quadrature)
 
 
 def _check_view(theta_o, alpha, *, traced=True):
@@ -144,10 +147,10 @@ def _exp_cut(dtype):
     return float(-np.log(np.finfo(dtype).tiny)) * 0.99
 
 
-def _lambda_cos(cos, alpha, kind):
+def _lambda_cos(cos, alpha, ndf):
     """L = cos θ · Λ(θ) for cos θ ∈ [0, 1]; finite (L(0) = α/2 GGX, α/(2√π) Beckmann)."""
     a2 = alpha * alpha
-    if kind == "ggx":
+    if ndf == "ggx":
         return 0.5 * (jnp.sqrt(a2 + (1 - a2) * cos * cos) - cos)
     sin2 = jnp.clip(1 - cos * cos, 0, 1)
     ok = cos * cos < _exp_cut(cos.dtype) * a2 * sin2  # else a² huge: Λ = 0 to working precision
@@ -158,21 +161,21 @@ def _lambda_cos(cos, alpha, kind):
     return jnp.where(ok, jnp.maximum(lam, 0), 0)
 
 
-def _g2_denominator(ci, co, alpha, kind):
+def _g2_denominator(ci, co, alpha, ndf):
     """cos_i cos_o / G₂ = cos_i cos_o + cos_o L_i + cos_i L_o (> 0 unless cos_i = cos_o = 0)."""
-    return ci * co + co * _lambda_cos(ci, alpha, kind) + ci * _lambda_cos(co, alpha, kind)
+    return ci * co + co * _lambda_cos(ci, alpha, ndf) + ci * _lambda_cos(co, alpha, ndf)
 
 
-def _g2_over_cos_o(ci, co, alpha, kind):
+def _g2_over_cos_o(ci, co, alpha, ndf):
     """G₂ / cos_o = cos_i / (cos_i cos_o + cos_o L_i + cos_i L_o), finite at cos_o = 0."""
-    den = _g2_denominator(ci, co, alpha, kind)
+    den = _g2_denominator(ci, co, alpha, ndf)
     ok = den > 0
     return jnp.where(ok, ci / jnp.where(ok, den, 1), 0)
 
 
-def _beta_pdf(sb, cb, kind):
+def _beta_pdf(sb, cb, ndf):
     """du/dβ of the NDF CDF u in β = atan(tan θ_h / α) (D cos θ_h dω_h = (du/dβ) dβ dφ_h / 2π)."""
-    if kind == "ggx":  # u = sin²β
+    if ndf == "ggx":  # u = sin²β
         return 2 * sb * cb
     ok = sb * sb < _exp_cut(sb.dtype) * cb * cb  # u = 1 − exp(−tan²β)
     cs = jnp.where(ok, cb, 1)
@@ -215,27 +218,27 @@ def _phi_rule(n):
 
 
 @functools.lru_cache(maxsize=None)
-def _inner_rule(n, kind):
+def _inner_rule(n, ndf):
     """Inner rule on [0, 1] as (s, 1 − s, weights); GGX: s = sin(πx/2) clusters at the horizon."""
     if n < 1:
         raise ValueError("n_u must be >= 1")
     x, omx, w = _gl01(n)
-    if kind == "ggx":
+    if ndf == "ggx":
         s, t = np.sin(np.pi * x / 2), 2 * np.sin(np.pi * omx / 4) ** 2  # t = 1 − s, no cancellation
         return s, t, w * np.pi / 2 * np.cos(np.pi * x / 2)
     return x, omx, w
 
 
 # ----------------------------------------------------------------------------- BRDF pieces
-@functools.partial(jax.jit, static_argnames=("kind",))
-def ndf(cos_h, alpha, kind="ggx"):
+@functools.partial(jax.jit, static_argnames=("ndf",))
+def normal_distribution(cos_h, alpha, ndf="ggx"):
     """Normal distribution D(h) as a function of cos θ_h (0 for cos θ_h ≤ 0)."""
-    _check_kind(kind)
+    _check_ndf(ndf)
     cos_h, alpha = _asfloat(cos_h, alpha)
     a2 = alpha * alpha
     c2 = _clamp01(cos_h) ** 2
     s2 = 1 - c2
-    if kind == "ggx":
+    if ndf == "ggx":
         d = a2 * c2 + s2
         return jnp.where(cos_h > 0, a2 / (np.pi * d * d), 0)
     ok = (cos_h > 0) & (s2 < _exp_cut(cos_h.dtype) * a2 * c2)
@@ -244,38 +247,38 @@ def ndf(cos_h, alpha, kind="ggx"):
     return jnp.where(ok, jnp.exp(expo) / (np.pi * a2), 0)
 
 
-@functools.partial(jax.jit, static_argnames=("kind",))
-def smith_lambda(cos_theta, alpha, kind="ggx"):
+@functools.partial(jax.jit, static_argnames=("ndf",))
+def smith_lambda(cos_theta, alpha, ndf="ggx"):
     """Smith Λ(ω) from cos θ; +inf (zero gradient) for cos θ ≤ 0, where G → 0."""
-    _check_kind(kind)
+    _check_ndf(ndf)
     cos_theta, alpha = _asfloat(cos_theta, alpha)
     pos = cos_theta > 0
     cs = jnp.where(pos, _clamp01(cos_theta), 1)
-    return jnp.where(pos, _lambda_cos(cs, alpha, kind) / cs, jnp.inf)
+    return jnp.where(pos, _lambda_cos(cs, alpha, ndf) / cs, jnp.inf)
 
 
-@functools.partial(jax.jit, static_argnames=("kind",))
-def smith_g1(cos_theta, alpha, kind="ggx"):
+@functools.partial(jax.jit, static_argnames=("ndf",))
+def smith_g1(cos_theta, alpha, ndf="ggx"):
     """Smith masking G₁ = 1 / (1 + Λ) = cos θ / (cos θ + L); 0 for cos θ ≤ 0."""
-    _check_kind(kind)
+    _check_ndf(ndf)
     cos_theta, alpha = _asfloat(cos_theta, alpha)
     c = _clamp01(cos_theta)
-    return c / (c + _lambda_cos(c, alpha, kind))
+    return c / (c + _lambda_cos(c, alpha, ndf))
 
 
-@functools.partial(jax.jit, static_argnames=("kind",))
-def smith_g2(cos_i, cos_o, alpha, kind="ggx"):
+@functools.partial(jax.jit, static_argnames=("ndf",))
+def smith_g2(cos_i, cos_o, alpha, ndf="ggx"):
     """Height-correlated Smith G₂ = 1 / (1 + Λ_i + Λ_o); 0 unless cos_i, cos_o > 0."""
-    _check_kind(kind)
+    _check_ndf(ndf)
     cos_i, cos_o, alpha = _asfloat(cos_i, cos_o, alpha)
     ci, co = _clamp01(cos_i), _clamp01(cos_o)
-    return co * _g2_over_cos_o(ci, co, alpha, kind)
+    return co * _g2_over_cos_o(ci, co, alpha, ndf)
 
 
-@functools.partial(jax.jit, static_argnames=("kind",))
-def brdf_no_fresnel(wi, wo, alpha, kind="ggx"):
+@functools.partial(jax.jit, static_argnames=("ndf",))
+def brdf_no_fresnel(wi, wo, alpha, ndf="ggx"):
     """ρ̃ = D(h) G₂ / (4 cos_i cos_o) for unit vectors (..., 3), n = z; 0 below either horizon."""
-    _check_kind(kind)
+    _check_ndf(ndf)
     wi, wo, alpha = _asfloat(wi, wo, alpha)
     ci, co = wi[..., 2], wo[..., 2]
     up = (ci > 0) & (co > 0)
@@ -283,14 +286,16 @@ def brdf_no_fresnel(wi, wo, alpha, kind="ggx"):
     nh2 = jnp.sum(hs * hs, axis=-1)
     cos_h = hs[..., 2] / jnp.sqrt(jnp.where(up, nh2, 1))
     ci, co = jnp.where(up, _clamp01(ci), 1), jnp.where(up, _clamp01(co), 1)
-    rho = ndf(cos_h, alpha, kind) / (4 * _g2_denominator(ci, co, alpha, kind))
+    rho = normal_distribution(cos_h, alpha, ndf) / (4 * _g2_denominator(ci, co, alpha, ndf))
     return jnp.where(up, rho, 0)
 
 
 # ----------------------------------------------------------------------------- patch quadrature
-@functools.partial(jax.jit, static_argnames=("n_u", "n_phi", "kind"))
-def patch_quadrature(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx") -> PatchQuadrature:
+def patch_quadrature(theta_o, alpha, *, quadrature=DEFAULT_QUADRATURE,
+                     ndf="ggx") -> PatchQuadrature:
     """Deterministic quadrature of L[f](θ_o, α) for one scalar (θ_o, α); N = n_phi · n_u nodes.
+
+    `quadrature` = (n_u, n_phi), the inner and azimuth orders (static).
 
     Outer: n_phi azimuth nodes φ_h ∈ (0, π) (`_phi_rule`); inner: n_u nodes in
     β = atan(tan θ_h / α) ∈ [0, β_max(φ_h)] (`_inner_rule`), where cos_i = 0 at
@@ -299,7 +304,13 @@ def patch_quadrature(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx") -> PatchQu
     w_β (du/dβ) · w_φ · (1/2π) · 2 · (G₂/cos θ_o) · ⟨o,h⟩/cos θ_h, nodes on y > 0 only.
     jit/vmap/grad friendly (shapes static in n_u, n_phi); returns `PatchQuadrature`.
     """
-    _check_kind(kind)
+    _check_ndf(ndf)
+    n_u, n_phi = _check_orders(quadrature)
+    return _patch_quadrature(theta_o, alpha, n_u, n_phi, ndf)
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3, 4))
+def _patch_quadrature(theta_o, alpha, n_u, n_phi, ndf):
     theta_o, alpha = _asfloat(theta_o, alpha)
     dt = theta_o.dtype
     k = lambda a: jnp.asarray(a, dt)  # noqa: E731  host constants in the input dtype
@@ -312,15 +323,15 @@ def patch_quadrature(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx") -> PatchQu
     den = jnp.where(pos, 1, r - so * cp)
     bmax = jnp.where(pos, jnp.arctan2(num, alpha * co), jnp.arctan2(co, alpha * den))
     gmax = jnp.where(pos, jnp.arctan2(alpha * co, num), jnp.arctan2(alpha * den, co))
-    s, t, g = _inner_rule(n_u, kind)
+    s, t, g = _inner_rule(n_u, ndf)
     beta = bmax * k(s)[None, :]  # (n_phi, 1) × (1, n_u): ranks aligned explicitly
     gamma = gmax + bmax * k(t)[None, :]
     sb, cb = jnp.sin(beta), jnp.sin(gamma)
     ch, sh, th = _half_vector_trig(sb, cb, alpha)
     c = so * sh * cp + co * ch  # ⟨o, h⟩
     ci = jnp.maximum(2 * c * ch - co, 0)  # ⟨n, ω_i⟩
-    w_beta = bmax * k(g)[None, :] * _beta_pdf(sb, cb, kind)
-    weight = w_beta * wphi * _g2_over_cos_o(ci, co, alpha, kind) * (so * th * cp + co)
+    w_beta = bmax * k(g)[None, :] * _beta_pdf(sb, cb, ndf)
+    weight = w_beta * wphi * _g2_over_cos_o(ci, co, alpha, ndf) * (so * th * cp + co)
     weight = jnp.maximum(weight, 0)
     h = jnp.stack([sh * cp, sh * sp, ch], axis=-1)
     o = jnp.stack([so, jnp.zeros_like(so), co])
@@ -359,49 +370,49 @@ def _vmapped(fn, *args):
     return jax.tree_util.tree_map(lambda y: y[:n].reshape(shape + y.shape[1:]), out)
 
 
-@functools.partial(jax.jit, static_argnames=("n_u", "n_phi", "kind"))
+@functools.partial(jax.jit, static_argnames=("n_u", "n_phi", "ndf"))
 @functools.partial(jax.vmap, in_axes=(0, 0, None, None, None))
-def _albedo_flat(theta_o, alpha, n_u, n_phi, kind):
-    return jnp.sum(patch_quadrature(theta_o, alpha, n_u=n_u, n_phi=n_phi, kind=kind).weight)
+def _albedo_flat(theta_o, alpha, n_u, n_phi, ndf):
+    return jnp.sum(_patch_quadrature(theta_o, alpha, n_u, n_phi, ndf).weight)
 
 
-@functools.partial(jax.jit, static_argnames=("n_u", "n_phi", "kind"))
+@functools.partial(jax.jit, static_argnames=("n_u", "n_phi", "ndf"))
 @functools.partial(jax.vmap, in_axes=(0, None, None, None))
-def _normal_view_flat(alpha, n_u, n_phi, kind):
-    q = patch_quadrature(jnp.zeros_like(alpha), alpha, n_u=n_u, n_phi=n_phi, kind=kind)
+def _normal_view_flat(alpha, n_u, n_phi, ndf):
+    q = _patch_quadrature(jnp.zeros_like(alpha), alpha, n_u, n_phi, ndf)
     mean, cov = light_moments(q)
     return mean[2], cov[2, 2] + mean[2] ** 2
 
 
-def albedo(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx"):
+def albedo(theta_o, alpha, *, quadrature=DEFAULT_QUADRATURE, ndf="ggx"):
     """A(θ_o, α) = L[1] = Σ weight (broadcasts over θ_o and α; jit + vmap inside).
 
-    θ_o ∈ [0, π/2] radians, α ∈ (0, 1], quadrature orders n_u ≥ 1, n_phi ≥ 2 (checked)."""
-    _check_kind(kind)
-    n_u, n_phi = _check_orders(n_u, n_phi)
+    θ_o ∈ [0, π/2] radians, α ∈ (0, 1], quadrature (n_u ≥ 1, n_phi ≥ 2) (checked)."""
+    _check_ndf(ndf)
+    n_u, n_phi = _check_orders(quadrature)
     theta_o, alpha = _check_view(theta_o, alpha)
-    return _vmapped(lambda t, a: _albedo_flat(t, a, n_u, n_phi, kind), theta_o, alpha)
+    return _vmapped(lambda t, a: _albedo_flat(t, a, n_u, n_phi, ndf), theta_o, alpha)
 
 
-def lobe_moments_normal_view(alpha, *, n_u=48, n_phi=48, kind="ggx"):
+def lobe_moments_normal_view(alpha, *, quadrature=DEFAULT_QUADRATURE, ndf="ggx"):
     """(a, e_z) = (E[⟨ω_i, n⟩], E[⟨ω_i, n⟩²]) of the light lobe p_R at θ_o = 0 (ω_r = n).
 
     This is the split-sum "ω_o = n = ω_r" kernel of a prefiltered environment map
     (Kneiphof et al. 2019, §3.2)."""
-    _check_kind(kind)
-    n_u, n_phi = _check_orders(n_u, n_phi)
+    _check_ndf(ndf)
+    n_u, n_phi = _check_orders(quadrature)
     _, alpha = _check_view(0.0, alpha, traced=False)
-    return _vmapped(lambda a: _normal_view_flat(a, n_u, n_phi, kind), alpha)
+    return _vmapped(lambda a: _normal_view_flat(a, n_u, n_phi, ndf), alpha)
 
 
-def splitsum_light_moments(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx"):
+def splitsum_light_moments(theta_o, alpha, *, quadrature=DEFAULT_QUADRATURE, ndf="ggx"):
     """Split-sum (mean, cov) of ω_i: the normal-view lobe rotated onto ω_r = (−sin θ_o, 0, cos θ_o).
 
     μ = a ω_r,  Σ = e_t (I − ω_r ω_rᵀ) + e_z ω_r ω_rᵀ − μ μᵀ,  e_t = (1 − e_z)/2.  The rotated lobe
     is not clipped at the horizon (the split-sum approximation)."""
     theta_o, alpha = _check_view(theta_o, alpha, traced=False)
     theta_o, alpha = jnp.broadcast_arrays(*_asfloat(theta_o, alpha))
-    a, ez = lobe_moments_normal_view(alpha, n_u=n_u, n_phi=n_phi, kind=kind)
+    a, ez = lobe_moments_normal_view(alpha, quadrature=quadrature, ndf=ndf)
     r = jnp.stack([-jnp.sin(theta_o), jnp.zeros_like(theta_o), jnp.cos(theta_o)], axis=-1)
     rr = r[..., :, None] * r[..., None, :]
     et = (1 - ez) / 2
@@ -412,18 +423,18 @@ def splitsum_light_moments(theta_o, alpha, *, n_u=48, n_phi=48, kind="ggx"):
     return mean, cov
 
 
-@functools.partial(jax.jit, static_argnames=("n_samples", "kind"))
-def sample_patch_mc(key, theta_o, alpha, n_samples, kind="ggx") -> PatchQuadrature:
+@functools.partial(jax.jit, static_argnames=("n_samples", "ndf"))
+def sample_patch_mc(key, theta_o, alpha, n_samples, ndf="ggx") -> PatchQuadrature:
     """Unbiased Monte Carlo nodes for L[f]: h ~ D cos θ_h over the full azimuth [0, 2π).
 
     weight = G₂ ⟨o,h⟩ / (cos θ_h cos θ_o) / n_samples, 0 where cos_i ≤ 0."""
-    _check_kind(kind)
+    _check_ndf(ndf)
     theta_o, alpha = _asfloat(theta_o, alpha)
     dt = theta_o.dtype
     ku, kp = jax.random.split(key)
     u = jax.random.uniform(ku, (n_samples,), dt)
     phi = jax.random.uniform(kp, (n_samples,), dt, 0, 2 * np.pi)
-    if kind == "ggx":  # inverse CDF: tan²β = u/(1 − u)
+    if ndf == "ggx":  # inverse CDF: tan²β = u/(1 − u)
         sb, cb = jnp.sqrt(u), jnp.sqrt(1 - u)
     else:  # tan²β = −log(1 − u)
         tb = jnp.sqrt(-jnp.log1p(-u))
@@ -434,7 +445,7 @@ def sample_patch_mc(key, theta_o, alpha, n_samples, kind="ggx") -> PatchQuadratu
     c = so * sh * cp + co * ch
     ci_raw = 2 * c * ch - co
     ci = jnp.maximum(ci_raw, 0)
-    w = _g2_over_cos_o(ci, co, alpha, kind) * (so * th * cp + co) / n_samples
+    w = _g2_over_cos_o(ci, co, alpha, ndf) * (so * th * cp + co) / n_samples
     w = jnp.where(ci_raw > 0, w, 0)
     h = jnp.stack([sh * cp, sh * sp, ch], axis=-1)
     o = jnp.stack([so, jnp.zeros_like(so), co])

@@ -43,7 +43,7 @@ from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance
                      texel_centers, texel_solid_angles)
 from .fresnel import complex_dtype
 from .lut import ShatLUT, build_shat_lut
-from .microfacet import albedo, ndf, smith_g2
+from .microfacet import albedo, normal_distribution, smith_g2
 from .spectra import DEFAULT_OBSERVER, OBSERVERS
 from .uplift import cross_band_name
 
@@ -96,7 +96,7 @@ def _filter_level(alpha, rad, dirs, omega, out_dirs, lum, per_channel):
         ok = ci > 0
         cs = jnp.where(ok, ci, 0.0)
         ch = jnp.sqrt((1 + cs) / 2)
-        k = ndf(ch, alpha) * smith_g2(cs, jnp.ones_like(cs), alpha) / 4
+        k = normal_distribution(ch, alpha) * smith_g2(cs, jnp.ones_like(cs), alpha) / 4
         wgt = jnp.where(ok, k, 0.0) * omega
         p = jnp.matmul(wgt, rad, precision=HIGHEST) / jnp.matmul(wgt, ones, precision=HIGHEST)[:, None]
         if per_channel:

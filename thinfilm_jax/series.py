@@ -50,21 +50,21 @@ class SeriesTerms(NamedTuple):
         return self.amp * az2 ** (m / 2)
 
 
-def series_terms(film: Film, cos_theta, *, base: str = "general") -> SeriesTerms:
+def series_terms(film: Film, cos_theta, *, arithmetic: str = "complex") -> SeriesTerms:
     """C₀, R* − T₁₂₁, z = r₂₁r₂₃ and D of `film` at cos θ₁ (inputs pre-broadcast).
 
     Concrete inputs are checked like `airy_reflectance`'s (film domain, cos θ₁ ∈ [0, 1],
-    `base` "dielectric" or "general", κ₃ = 0 on the dielectric path); traced ones are not.
+    `arithmetic` "real" or "complex", κ₃ = 0 on the dielectric path); traced ones are not.
     """
-    V.check_choice("base", base, ("dielectric", "general"))
+    V.check_choice("arithmetic", arithmetic, ("real", "complex"))
     if all(V.is_concrete(x) for x in (*film, cos_theta)):
-        from .airy import choose_base
+        from .airy import choose_arithmetic
 
         film = V.check_film(film)
         cos_theta = V.check_cos_theta(cos_theta)
         V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta)])
-        choose_base(film, base)
-    ifc = film_interfaces(film, cos_theta, base=base)
+        choose_arithmetic(film, arithmetic)
+    ifc = film_interfaces(film, cos_theta, arithmetic=arithmetic)
     r12, r23 = ifc.r12, ifc.r23
     R12 = jnp.real(r12) ** 2 + jnp.imag(r12) ** 2
     R23 = jnp.real(r23) ** 2 + jnp.imag(r23) ** 2

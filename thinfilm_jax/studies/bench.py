@@ -55,10 +55,10 @@ def summarise_targets(rows, peers) -> dict:
                                                     "kernel K29 exact Ŝ f32"),
         "f32_over_f64_cost (K29 LUT)": ratio("kernel K29 LUT f32", "kernel K29 LUT f64"),
         "f32_over_f64_cost (spectral)": ratio("spectral f32", "spectral (reference)"),
-        "dielectric_over_general_cost (spectral)": ratio("spectral, dielectric arithmetic",
-                                                         "spectral, general arithmetic"),
-        "dielectric_over_general_cost (Fourier M=2)": ratio(
-            "Fourier M=2, dielectric arithmetic", "Fourier M=2, general arithmetic"),
+        "real_over_complex_cost (spectral)": ratio("spectral, real arithmetic",
+                                                         "spectral, complex arithmetic"),
+        "real_over_complex_cost (Fourier M=2)": ratio(
+            "Fourier M=2, real arithmetic", "Fourier M=2, complex arithmetic"),
         "cie1931_over_stiles_burch_cost (spectral)": ratio("spectral CIE 1931 (reference)",
                                                            "spectral (reference)"),
         "patch_filtered_over_ideal_cost": ratio("filtered", "ideal"),

@@ -44,6 +44,7 @@ from ..airy import airy_reflectance
 from ..film import Film
 from ..kernels import filtered_kernel, ideal_kernel, lobe_moments
 from ..lut import build_shat_lut, lut_max_error
+from ..options import ModelOptions
 from ..patch import patch_radiance, patch_radiance_mc
 from ..reflectance import fourier_bands, rgb_reflectance
 from ..spectra import get_observer, trapezoid_weights
@@ -90,10 +91,12 @@ def jitted_rgb(**kw):
 
 
 @functools.cache
-def jitted_patch(**kw):
-    """`patch_radiance` with fixed options under one `jax.jit` (cached like `jitted_rgb`)."""
-    return jax.jit(lambda film, theta_o, alpha, lut=None: patch_radiance(film, theta_o, alpha,
-                                                                         lut=lut, **kw))
+def jitted_patch(method="reference", observer=SB, **knobs):
+    """`patch_radiance` with fixed options under one `jax.jit`; `knobs` are `ModelOptions`
+    fields (terms, shat, quadrature, ndf, arithmetic)."""
+    options = ModelOptions(**knobs)
+    return jax.jit(lambda film, theta_o, alpha, lut=None: patch_radiance(
+        film, theta_o, alpha, method=method, observer=observer, options=options, lut=lut))
 
 
 def subsampled_observer(observer: str, step: int):
@@ -106,12 +109,12 @@ def subsampled_observer(observer: str, step: int):
     return lam, w / w.sum(axis=0)
 
 
-def spectral_subsampled(film: Film, cos_theta, lam, weights, base: str = "general"):
+def spectral_subsampled(film: Film, cos_theta, lam, weights, arithmetic: str = "complex"):
     """Σ_k W_kj R(θ, λ_k) with `airy_reflectance` on the given nodes (broadcast inputs)."""
     film_k = Film(*(jnp.asarray(x)[..., None] for x in film))
     dtype = jnp.result_type(cos_theta, float)
     r = airy_reflectance(film_k, jnp.asarray(cos_theta)[..., None], jnp.asarray(lam, dtype),
-                         base=base)
+                         arithmetic=arithmetic)
     return r @ jnp.asarray(weights, dtype)
 
 
@@ -124,32 +127,33 @@ def _smallest_m(errs: list[dict], key: str, tol: float):
 
 def _shading_extras(cfg, run, rgb, film, c, film32, c32, names, ref, m32):
     """Family (a) specialisation rows: float32, CIE 1931, dielectric arithmetic."""
-    run(rgb(method="spectral", base="general"), (film32, c32), "spectral f32", "float32",
+    run(rgb(method="spectral", arithmetic="complex"), (film32, c32), "spectral f32", "float32",
         {"lambda_step": 1}, np.float32, ref)
-    run(rgb(method="fourier", terms=m32, base="general"), (film32, c32), f"Fourier M={m32} f32",
+    run(rgb(method="fourier", terms=m32,
+            arithmetic="complex"), (film32, c32), f"Fourier M={m32} f32",
         "float32", {"terms": m32, "shat": "exact"}, np.float32, ref)
-    run(rgb(method="fourier", terms=m32, shat="gaussian", base="general"), (film32, c32),
+    run(rgb(method="fourier", terms=m32, shat="gaussian", arithmetic="complex"), (film32, c32),
         f"Fourier M={m32}, Gaussian Ŝ f32", "float32", {"terms": m32, "shat": "gaussian"},
         np.float32, ref)
     # one observer: the cost scales with its number of samples (CIE 1931 at 1 nm: 471)
-    ref_cie = run(rgb(method="spectral", observer=CIE, base="general"), (film, c),
+    ref_cie = run(rgb(method="spectral", observer=CIE, arithmetic="complex"), (film, c),
                   "spectral CIE 1931 (reference)", "observer",
                   {"observer": CIE, "n_lambda": len(get_observer(CIE).wavelengths)},
                   np.float64, None, observer=CIE, error_vs="spectral CIE 1931 f64")
-    run(rgb(method="fourier", terms=m32, observer=CIE, base="general"), (film, c),
+    run(rgb(method="fourier", terms=m32, observer=CIE, arithmetic="complex"), (film, c),
         f"Fourier M={m32} CIE 1931", "observer", {"observer": CIE, "terms": m32}, np.float64,
         ref_cie, observer=CIE, error_vs="spectral CIE 1931 f64")
     # dielectric specialisation (real arithmetic) on the dielectric materials only
     diel = np.isin(names, DIELECTRIC_MATERIALS)
     fd, cd = take(film, diel), c[diel]
     ref_d = ref[diel]
-    for base in ("general", "dielectric"):
-        run(rgb(method="spectral", base=base), (fd, cd), f"spectral, {base} arithmetic",
-            "dielectric subset", {"base": base, "grid": "dielectric materials"}, np.float64,
+    for arith in ("complex", "real"):
+        run(rgb(method="spectral", arithmetic=arith), (fd, cd), f"spectral, {arith} arithmetic",
+            "dielectric subset", {"arithmetic": arith, "grid": "dielectric materials"}, np.float64,
             ref_d, n_eval=int(diel.sum()), sel=diel)
-        run(rgb(method="fourier", terms=m32, base=base), (fd, cd),
-            f"Fourier M={m32}, {base} arithmetic", "dielectric subset",
-            {"base": base, "terms": m32, "grid": "dielectric materials"}, np.float64, ref_d,
+        run(rgb(method="fourier", terms=m32, arithmetic=arithmetic), (fd, cd),
+            f"Fourier M={m32}, {arith} arithmetic", "dielectric subset",
+            {"arithmetic": arith, "terms": m32, "grid": "dielectric materials"}, np.float64, ref_d,
             n_eval=int(diel.sum()), sel=diel)
 
 
@@ -174,7 +178,7 @@ def bench_shading(cfg: BenchConfig, verbose: bool = True):
                              error_vs))
         return out
 
-    ref = run(rgb(method="spectral", base="general"), (film, c), "spectral (reference)",
+    ref = run(rgb(method="spectral", arithmetic="complex"), (film, c), "spectral (reference)",
               "spectral", {"lambda_step": 1, "n_lambda": len(get_observer(SB).wavelengths)},
               np.float64, None)
     for step in cfg.lambda_steps:
@@ -186,11 +190,11 @@ def bench_shading(cfg: BenchConfig, verbose: bool = True):
             {"lambda_step": step, "n_lambda": len(lam)}, np.float64, ref)
     fourier_out = {}
     for m in cfg.fourier_terms:
-        fourier_out[m] = run(rgb(method="fourier", terms=m, base="general"), (film, c),
+        fourier_out[m] = run(rgb(method="fourier", terms=m, arithmetic="complex"), (film, c),
                              f"Fourier M={m}", "Fourier (tabulated Ŝ)",
                              {"terms": m, "shat": "exact"}, np.float64, ref)
     for m in cfg.gaussian_terms:
-        run(rgb(method="fourier", terms=m, shat="gaussian", base="general"), (film, c),
+        run(rgb(method="fourier", terms=m, shat="gaussian", arithmetic="complex"), (film, c),
             f"Fourier M={m}, Gaussian Ŝ", "Fourier (Gaussian Ŝ)",
             {"terms": m, "shat": "gaussian"}, np.float64, ref)
     m32 = 2 if 2 in cfg.fourier_terms else cfg.fourier_terms[0]
@@ -354,11 +358,12 @@ def bench_kernels(cfg, film, theta, alpha, names, ref, exact_k29, ideal_out, lab
         (f, co, mu, cv), i = inputs(dtype, sel)
         if kernel == "ideal":
             fn = jax.jit(functools.partial(ideal_kernel, shat=knobs.get("shat", "exact"),
-                                           base=knobs.get("base", "general")))
+                                           arithmetic=knobs.get("arithmetic", "complex")))
             args = (f, co)
         else:
             fn = jax.jit(lambda f, wo, mu, cv, lut: filtered_kernel(
-                f, wo, mu, cv, lut=lut, shat=knobs["shat"], base=knobs.get("base", "general")))
+                f, wo, mu, cv, lut=lut, shat=knobs["shat"],
+                    arithmetic=knobs.get("arithmetic", "complex")))
             args = (f, view_vector(co), mu, cv, lut)
         out, t = time_call(fn, args, cfg.repeats)
         m = p if sel is None else int(sel.sum())
@@ -381,11 +386,11 @@ def bench_kernels(cfg, film, theta, alpha, names, ref, exact_k29, ideal_out, lab
         run("filtered", jnp.float64, "kernel K29 LUT f64", {"kernel": "K29", "shat": "lut"},
             lut=lut64)
     if cfg.extras and diel.any():
-        for base in ("general", "dielectric"):
-            run("ideal", jnp.float32, f"kernel ideal M=2 f32, {base} (dielectric films)",
-                {"kernel": "ideal", "terms": 2, "base": base}, sel=diel)
-            run("filtered", jnp.float32, f"kernel K29 LUT f32, {base} (dielectric films)",
-                {"kernel": "K29", "shat": "lut", "base": base}, sel=diel, lut=lut32)
+        for arith in ("complex", "real"):
+            run("ideal", jnp.float32, f"kernel ideal M=2 f32, {arith} (dielectric films)",
+                {"kernel": "ideal", "terms": 2, "arithmetic": arith}, sel=diel)
+            run("filtered", jnp.float32, f"kernel K29 LUT f32, {arith} (dielectric films)",
+                {"kernel": "K29", "shat": "lut", "arithmetic": arith}, sel=diel, lut=lut32)
     check = {"kernel_K29_exact_vs_patch_filtered_gt_moments_max_abs":
              float(np.abs(k_exact - exact_k29).max()),
              "kernel_K29_lut_vs_exact_max_abs": float(np.abs(k_lut - k_exact).max())}

@@ -28,6 +28,7 @@ from ..colorimetry import delta_e2000
 from ..envmap import SHIPPED, load_envmap
 from ..film import Film
 from ..ibl import envmap_radiance
+from ..options import ModelOptions
 from ..prefilter import prefilter_envmap
 from .render import camera, sphere
 
@@ -65,7 +66,7 @@ REALTIME_VARIANTS = (
     ("ideal", dict(method="ideal")),
     ("ideal, diagonal", dict(method="ideal", cross_band=False)),
     ("filtered (LUT)", dict(method="filtered")),
-    ("filtered, Gaussian Ŝ", dict(method="filtered", shat="gaussian")),
+    ("filtered, Gaussian Ŝ", dict(method="filtered", options=ModelOptions(shat="gaussian"))),
     ("filtered, diagonal", dict(method="filtered", cross_band=False)),
 )
 
@@ -104,9 +105,9 @@ OPTION_VARIANTS = (
      dict(method="filtered")),
     ("filtered, diagonal R_j P_j", {}, dict(method="filtered", cross_band=False)),
     ("filtered, per-channel moments", dict(moments="per_channel"), dict(method="filtered")),
-    ("filtered, exact Ŝ", {}, dict(method="filtered", shat="exact")),
-    ("filtered, Gaussian Ŝ", {}, dict(method="filtered", shat="gaussian")),
-    ("filtered, M = 1", {}, dict(method="filtered", terms=1)),
+    ("filtered, exact Ŝ", {}, dict(method="filtered", options=ModelOptions(shat="exact"))),
+    ("filtered, Gaussian Ŝ", {}, dict(method="filtered", options=ModelOptions(shat="gaussian"))),
+    ("filtered, M = 1", {}, dict(method="filtered", options=ModelOptions(shat="lut", terms=1))),
     ("filtered, 32×64 prefilter", dict(resolution=(32, 64)), dict(method="filtered")),
     ("filtered, 9 levels", dict(levels=9), dict(method="filtered")),
     ("filtered, 33 levels", dict(levels=33), dict(method="filtered")),

@@ -20,17 +20,21 @@ values against the reference (mirror white Y = 1), mean and p95 per panel.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from dataclasses import dataclass
 
+import jax
 import numpy as np
 
 from .._io import atomic_write, write_json
+from ..airy import choose_arithmetic
 from ..colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
 from ..envmap import SHIPPED, load_envmap, lookup_bilinear, luminance_weights
 from ..film import Film
-from ..ibl import envmap_radiance
+from ..ibl import REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
 from ..prefilter import prefilter_envmap
+from ..sharding import batch_mesh, map_sharded, to_host
 
 SCENES = ("fig4", "fig3", "varying")
 METHODS = ("reference", "ideal", "filtered")
@@ -102,7 +106,33 @@ def _view_azimuth(env) -> float:
     return float(phi_sun + np.deg2rad(150.0))  # the sun behind the camera, off to one side
 
 
-def render_one(setup, cfg: RenderConfig, cache: dict):
+def _shade(film, normal, alpha, view, envmap, *, method, observer, options, subdivisions):
+    """One block of shading points (the function `map_sharded` runs on every device)."""
+    return envmap_radiance(film, alpha, normal, view, envmap, method=method, observer=observer,
+                           options=options, subdivisions=subdivisions)
+
+
+def _shader(cache: dict, devices, method: str, observer: str, film, alpha, env):
+    """The sharded shading program of `method`, compiled once per static configuration.
+
+    Film and normals are split across the devices; α, the view and the (prefiltered) map
+    are replicated. What `envmap_radiance` decides from concrete values is decided here,
+    before tracing: the arithmetic of the film and the reference's subdivisions.
+    """
+    options = REALTIME_OPTIONS._replace(arithmetic=choose_arithmetic(film, "auto"))
+    subdivisions = auto_subdivisions(env.shape[0], alpha) if method == "reference" else None
+    mesh = batch_mesh(devices)
+    key = ("program", mesh, method, observer, options, subdivisions)
+    if key not in cache:
+        cache[key] = map_sharded(functools.partial(
+            _shade, method=method, observer=observer, options=options,
+            subdivisions=subdivisions), in_axes=(0, 0, None, None, None), devices=mesh)
+    return cache[key]
+
+
+def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
+    """Shade one sphere with every method; the shading points are split across `devices`
+    (`thinfilm_jax.sharding.map_sharded`: None = every device, an int k = the first k)."""
     scene, label, name, make_film, alpha = setup
     if name not in cache:
         env = load_envmap(name)
@@ -117,10 +147,10 @@ def render_one(setup, cfg: RenderConfig, cache: dict):
     for method in cfg.methods:
         src = env if method in ("reference", "mc") else pref
         exact = method in ("reference", "mc")
+        shade = _shader(cache, devices, method, cfg.observer, film, alpha, env)
         for _ in range(1 if exact else 2):  # real time: the second call is the warm one
             t0 = time.perf_counter()
-            vals = np.asarray(envmap_radiance(film, alpha, pts, wo, src, method=method,
-                                              observer=cfg.observer))
+            vals = to_host(shade(film, pts, alpha, wo, src))
             out["times"][method] = time.perf_counter() - t0
         out["values"][method] = vals
     d = (np.arange(cfg.resolution) + 0.5) / cfg.resolution * 2 - 1
@@ -215,8 +245,13 @@ TITLES = {
 }
 
 
-def run_render(cfg: RenderConfig = RenderConfig(), out_dir="figures", progress: bool = True):
-    """Render every scene, write ibl_<scene>.png, ibl_render.npz and ibl_render.json."""
+def run_render(cfg: RenderConfig = RenderConfig(), out_dir="figures", progress: bool = True,
+               devices=None):
+    """Render every scene, write ibl_<scene>.png, ibl_render.npz and ibl_render.json.
+
+    The shading points of every frame are split across `devices` (None: every device);
+    with several processes (`jax.distributed`) process 0 writes the files.
+    """
     from pathlib import Path
 
     from tqdm.auto import tqdm
@@ -225,12 +260,15 @@ def run_render(cfg: RenderConfig = RenderConfig(), out_dir="figures", progress: 
     setups = scene_setups(cfg)
     cache: dict = {}
     results = []
-    for s in tqdm(setups, desc="render", disable=not progress):
-        results.append(render_one(s, cfg, cache))
+    for s in tqdm(setups, desc="render", disable=not progress or jax.process_index() > 0):
+        results.append(render_one(s, cfg, cache, devices))
+    if jax.process_index() > 0:
+        return summarise(results, cfg)
     for scene in cfg.scenes:
         rs = [r for r in results if r["scene"] == scene]
         plot_scene(rs, cfg, out / f"ibl_{scene}.png", TITLES[scene])
     summary = summarise(results, cfg)
+    summary["devices"] = batch_mesh(devices).size
     arrays = {}
     for i, r in enumerate(results):
         arrays[f"r{i}_mask"] = r["mask"]

@@ -6,17 +6,16 @@ points against the path that keeps what it leaves out, with the error it adds:
 
 | scene feature | left out | baseline → specialised |
 |---|---|---|
-| dielectric base (κ₃ = 0, η₂, η₃ ≥ η₁) | complex arithmetic | base general → dielectric |
+| dielectric base (κ₃ = 0, η₂, η₃ ≥ η₁) | complex arithmetic | arithmetic complex → real |
 | near-mirror surface (small α) | lobe filtering (K 20–28, filtered Ŝ) | K 29 → ideal |
 | one band needed | the other bands | three bands → one |
 | smooth enough interference | Fourier orders m > M | M = 4 → 2, M = 2 → 1 |
 | Ŝ from a table / closed form | the per-point λ quadrature | exact Ŝ → LUT, Gaussian fit |
-| no film (d = 0) | the film (series terms, Ŝ(mD)) | `ideal_kernel` at d = 0 → Fresnel only |
+| no film (d = 0) | the film (series terms, Ŝ(mD)) | `ideal_kernel` at d = 0 → `reflectance.bare_bands` |
 
-Two have no code path of their own and are measured through existing functions, as a
-renderer would build them: one band is an `spectra.Observer` holding one of the three
-bands (`band_subset`), and Fresnel-only is the bare outer|base interface of
-`fresnel.film_interfaces` with the film removed (η₂ = η₁), times Ŝ_j(0) (`fresnel_only`).
+The public functions choose two of these from concrete inputs (`ModelOptions.arithmetic` and
+`.layer`, "auto"); one band has no code path of its own and is measured as a renderer would
+build it, an `spectra.Observer` holding one of the three bands (`band_subset`).
 
 Inputs: `points` shading points, float32: θ_o on 32 angles in [0°, 85°] × α ∈ {0.01, 0.05,
 0.1, 0.25, 0.4} (light-lobe moments from `kernels.lobe_moments`), d ~ U(0, 1000) nm, films
@@ -41,11 +40,10 @@ import numpy as np
 
 from .._io import atomic_write, write_json
 from ..film import Film
-from ..fresnel import film_interfaces
 from ..kernels import filtered_kernel, ideal_kernel, lobe_moments
 from ..lut import build_shat_lut
-from ..reflectance import rgb_reflectance
-from ..spectra import Observer, get_observer, shat_at_zero
+from ..reflectance import bare_bands, rgb_reflectance
+from ..spectra import Observer, get_observer
 from ._common import MATERIALS, SB, BenchConfig, error_stats, view_vector
 from ._timing import environment, fmt, jsonable, log, time_call
 
@@ -63,28 +61,18 @@ def band_subset(observer: str, j: int) -> Observer:
                     obs.weights[:, j:j + 1], obs.areas[j:j + 1], (obs.band_names[j],))
 
 
-def fresnel_only(film: Film, cos_o, *, observer=SB, base: str = "general"):
-    """R_j without a film: R₁₃(cos θ_o) Ŝ_j(0), R₁₃ = ½(|r_s|² + |r_p|²) of the bare outer|base
-    interface (`film_interfaces` with η₂ = η₁, so r₁₂ = 0 and r₂₃ = r₁₃). Exact for d = 0 with
-    a non-dispersive base: R(λ) is then flat and each unit-area band returns it."""
-    bare = film._replace(eta_film=film.eta_outer)
-    r = film_interfaces(bare, cos_o, base=base).r23
-    refl = jnp.mean(jnp.real(r) ** 2 + jnp.imag(r) ** 2, axis=0)
-    return refl[..., None] * shat_at_zero(observer, refl.dtype)[None, :]
-
-
-def _ideal(terms=2, shat="exact", base="general", observer=SB):
+def _ideal(terms=2, shat="exact", arithmetic="complex", observer=SB):
     return lambda f, c, wo, mu, cv, lut: ideal_kernel(f, c, observer=observer, terms=terms,
-                                                      shat=shat, base=base)
+                                                      shat=shat, arithmetic=arithmetic)
 
 
-def _k29(shat="lut", base="general", observer=SB, terms=2):
+def _k29(shat="lut", arithmetic="complex", observer=SB, terms=2):
     return lambda f, c, wo, mu, cv, lut: filtered_kernel(
-        f, wo, mu, cv, observer=observer, terms=terms, shat=shat, lut=lut, base=base)
+        f, wo, mu, cv, observer=observer, terms=terms, shat=shat, lut=lut, arithmetic=arithmetic)
 
 
 def _fresnel(f, c, wo, mu, cv, lut):
-    return fresnel_only(f, c)
+    return bare_bands(f, c, SB)
 
 
 ONE_BAND = band_subset(SB, BAND)
@@ -93,10 +81,10 @@ ONE_BAND = band_subset(SB, BAND)
 # band replaces band BAND of the baseline), "mirror" (error scored on α ≤ NEAR_MIRROR_ALPHA)
 ROWS = (
     ("dielectric base", "complex arithmetic", "dielectric",
-     ("ideal M=2, general", _ideal()), ("ideal M=2, dielectric", _ideal(base="dielectric")),
+     ("ideal M=2, general", _ideal()), ("ideal M=2, dielectric", _ideal(arithmetic="real")),
      "ref"),
     ("dielectric base", "complex arithmetic", "dielectric",
-     ("K29 LUT, general", _k29()), ("K29 LUT, dielectric", _k29(base="dielectric")), ""),
+     ("K29 LUT, general", _k29()), ("K29 LUT, dielectric", _k29(arithmetic="real")), ""),
     ("near-mirror surface", "light-lobe filtering (K 20–28, filtered Ŝ)", "absorbing",
      ("K29 Gaussian Ŝ", _k29(shat="gaussian")), ("ideal M=2, Gaussian Ŝ", _ideal(shat="gaussian")),
      "mirror"),

@@ -26,6 +26,7 @@ from ..filtered import filtered_bands
 from ..lut import build_shat_lut, lookup
 from ..microfacet import albedo
 from ..opd import OPDMoments, cos_incidence_from_projection, opd_of_cos, taylor_opd_moments
+from ..options import ModelOptions
 from ..patch import patch_radiance
 from ..reflectance import rgb_reflectance
 from ..series import series_terms
@@ -63,25 +64,26 @@ STABILITY_FUNCTIONS = (
     "patch_radiance[filtered_gt_moments,lut]", "lut.lookup", "sensitivity_ft[exact]",
     "sensitivity_ft[gaussian]", "opd.taylor_opd_moments", "filtered.filtered_bands",
 )
-def check_airy(dtype: str = "float64", base: str = "auto") -> StabilityResult:
+def check_airy(dtype: str = "float64", arithmetic: str = "auto") -> StabilityResult:
     """`airy_reflectance` value and gradients: 0 ≤ R ≤ 1, tmm agreement (float64, θ < 90°),
     R = 1 at grazing incidence, float32 within a phase-scaled tolerance of float64."""
     t0 = time.perf_counter()
     film, (theta, lam) = stiff_grid(STIFF_THETA, STIFF_WAVELENGTH)
     c = stiff_cos(theta)
-    if base == "dielectric":  # the real path's domain: κ₃ = 0, η₂ ≥ η₁, η₃ ≥ η₁
+    if arithmetic == "real":  # the real path's domain: κ₃ = 0, η₂ ≥ η₁, η₃ ≥ η₁
         ok = ((film.kappa_base == 0) & (film.eta_film >= film.eta_outer)
               & (film.eta_base >= film.eta_outer))
         film, c, lam = take(film, ok), c[ok], lam[ok]
     film, c, lam = rounded((film, c, lam), dtype)
-    name = "airy_reflectance" + ("[dielectric]" if base == "dielectric" else "")
+    name = "airy_reflectance" + ("[dielectric]" if arithmetic == "real" else "")
     res = StabilityResult(name, dtype, len(c))
     args = as_dtype((film, c, lam), dtype)
     val, grads = value_and_grads(
-        lambda f, cc, ll: airy_reflectance(f, cc, ll, base="general" if base == "auto" else base),
+        lambda f, cc, ll: airy_reflectance(f, cc, ll,
+                                           arithmetic="complex" if arithmetic == "auto" else arithmetic),
         args, ("film", "cos_theta", "wavelength"))
     case_args = {"film": film, "cos_theta": c, "wavelength": lam}
-    call = f"airy_reflectance{'' if base == 'auto' else ', base=' + repr(base)}"
+    call = f"airy_reflectance{'' if arithmetic == 'auto' else ', arithmetic=' + repr(arithmetic)}"
     finish(res, val, grads, case_args, call, lambda v: v[:, None])
     bound_check(res, val, 0.0, 1.0, case_args, call, "0 ≤ R ≤ 1")
     if dtype == "float64":
@@ -123,7 +125,8 @@ RGB_VARIANTS = (("spectral", SB, 2, "exact"), ("spectral", CIE, 2, "exact"),
 def _rgb_variants_fn(variants):
     def fn(film, cos_theta):
         return jnp.stack([rgb_reflectance(film, cos_theta, method=m, observer=o, terms=t,
-                                          shat=sh, base="general") for m, o, t, sh in variants])
+                                          shat=sh,
+                                              arithmetic="complex") for m, o, t, sh in variants])
     return fn
 
 
@@ -160,7 +163,7 @@ def check_rgb(dtype: str = "float64", method: str = "spectral", observer: str = 
     finish(res, val, grads, case_args, call, lambda v: v.reshape(len(c), -1))
     wlo, whi, wabs = weights_range(observer)
     spec = np.asarray(rgb_reflectance(film, c, observer=observer, method="spectral",
-                                      base="general"))
+                                      arithmetic="complex"))
     tir = tir12(film, c)
     if method == "spectral":
         bound_check(res, val, wlo, whi, case_args, call,
@@ -216,7 +219,7 @@ def _series_error_bounds(film: Film, cos_theta, terms: int, observer: str):
     """Per case and band: the truncation tail ‖W_j‖₁ · mean_pol 2|R*−T||z|^{M+1}/(1−|z|)
     and the Gaussian-fit term (|C₀||1 − Ŝ_j(0)| + 2|R*−T| Σ_{m≤M}|z|^m) · fit error_j,
     both computed in float64 from `series_terms`."""
-    st = series_terms(film, jnp.asarray(cos_theta, jnp.float64), base="general")
+    st = series_terms(film, jnp.asarray(cos_theta, jnp.float64), arithmetic="complex")
     amp, az = np.abs(np.asarray(st.amp)), np.abs(np.asarray(st.z))
     c0 = np.abs(np.asarray(st.c0))
     wabs = weights_range(observer)[2]
@@ -239,8 +242,9 @@ def _patch_variants_fn(variants, dtype, n):
 
     def fn(film, theta_o, alpha):
         # batch_size = all patches: one vmapped batch, no lax.map remainder (half the compile)
-        return jnp.stack([patch_radiance(film, theta_o, alpha, method=m, shat=sh, lut=lut,
-                                         quadrature=(q, q), base="general", batch_size=n)
+        return jnp.stack([patch_radiance(film, theta_o, alpha, method=m, lut=lut, batch_size=n,
+                                         options=ModelOptions(shat=sh, quadrature=(q, q),
+                                                              arithmetic="complex"))
                           for m, sh in variants])
     return fn
 
@@ -282,7 +286,7 @@ def check_patch(dtype: str = "float64", method: str = "reference",
     case_args = {"film": film, "theta_o": theta, "alpha": alpha}
     call = "patch_radiance"
     finish(res, val, grads, case_args, call, lambda v: v.reshape(len(theta), -1))
-    a = np.asarray(albedo(theta, alpha, n_u=q, n_phi=q))
+    a = np.asarray(albedo(theta, alpha, quadrature=(q, q)))
     wlo, whi, wabs = weights_range(SB)
     c_o = np.cos(theta)
     # mirror limit: D varies by ~2η₂d·α·sin θ_o over the lobe, negligible for d ≤ 500 nm
@@ -290,13 +294,13 @@ def check_patch(dtype: str = "float64", method: str = "reference",
     if method == "reference":
         bound_check(res, val, a[:, None] * wlo, a[:, None] * whi, case_args, call,
                      "A·Σ min(W, 0) ≤ L_j ≤ A·Σ max(W, 0), A = albedo ≤ 1")
-        spec = np.asarray(rgb_reflectance(film, c_o, method="spectral", base="general"))
+        spec = np.asarray(rgb_reflectance(film, c_o, method="spectral", arithmetic="complex"))
         err = np.where(mirror, np.abs(val - a[:, None] * spec).max(axis=1), np.nan)
         ref_check(res, err, 1e-4, case_args, call,
                    "α = 1e-4, θ_o ≤ 0.7, d ≤ 500 nm: A·R_j^spectral(cos θ_o), ≤ 1e-4")
     else:
         fourier = np.asarray(rgb_reflectance(film, c_o, method="fourier", terms=2,
-                                             base="general"))
+                                             arithmetic="complex"))
         # |K 29| ≤ (|C₀| + 2|R*−T| Σ_{m≤2}|z|^m) ‖W‖₁ with |C₀| ≤ 2, |R*−T| ≤ 1, |z| ≤ 1
         hi = a[:, None] * 6.0 * wabs[None, :]
         bound_check(res, val, -hi, hi, case_args, call,
@@ -309,10 +313,11 @@ def check_patch(dtype: str = "float64", method: str = "reference",
             if dtype == "float32":  # what a user gets from np.float32(np.pi / 2) = π/2 + 4e-8
                 f7 = Film(*MATERIALS["fig7"][:3], 1.0).astype(jnp.float32)
                 over = np.asarray(patch_radiance(f7, np.float32(np.pi / 2), np.float32(0.3),
-                                                 method=method, quadrature=(q, q)))
+                                                 method=method,
+                                                     options=ModelOptions(quadrature=(q, q))))
                 below = np.asarray(patch_radiance(f7, np.float32(F32_BELOW_HALF_PI),
                                                   np.float32(0.3), method=method,
-                                                  quadrature=(q, q)))
+                                                      options=ModelOptions(quadrature=(q, q))))
                 res.documented.append({
                     "case": "θ_o = np.float32(π/2) (rounds to π/2 + 4.4e-8, accepted by the "
                             "validation; cos θ_o = −4.4e-8)", "n": 1,
@@ -460,7 +465,7 @@ def check_filtered_bands(dtype: str = "float64") -> StabilityResult:
 
     def fn(f, cc, m, s):
         return jnp.stack([filtered_bands(f, cc, OPDMoments(m, s), SB, shat=sh, lut=lut,
-                                         base="general") for sh in shats])
+                                         arithmetic="complex") for sh in shats])
 
     val, grads = value_and_grads(fn, as_dtype((film, c, mu_d, s_d), dtype),
                                  ("film", "cos_theta", "mu_D", "sigma_D"))
@@ -468,9 +473,9 @@ def check_filtered_bands(dtype: str = "float64") -> StabilityResult:
     call = "filtered_bands"
     finish(res, val, grads, case_args, call,
             lambda v: np.moveaxis(v, 0, 1).reshape(len(c), -1))
-    st = series_terms(film, jnp.asarray(c), base="general")
+    st = series_terms(film, jnp.asarray(c), arithmetic="complex")
     incoh = np.asarray(jnp.mean(st.c0, axis=0))[:, None] * np.asarray(shat_at_zero(SB))
-    fourier = np.asarray(rgb_reflectance(film, c, method="fourier", terms=2, base="general"))
+    fourier = np.asarray(rgb_reflectance(film, c, method="fourier", terms=2, arithmetic="complex"))
     wabs = weights_range(SB)[2]
     hi = 6.0 * wabs
     bound_check(res, np.moveaxis(val, 0, 1), -hi, hi, case_args, call,
@@ -492,7 +497,7 @@ def check_filtered_bands(dtype: str = "float64") -> StabilityResult:
 def stability_check(name: str, dtype: str) -> StabilityResult:
     """Run the check called `name` (one of `STABILITY_FUNCTIONS`) in `dtype`."""
     if name.startswith("airy_reflectance"):
-        return check_airy(dtype, "dielectric" if "dielectric" in name else "auto")
+        return check_airy(dtype, "real" if "dielectric" in name else "auto")
     if name.startswith("rgb_reflectance"):
         opts = name[name.index("[") + 1:-1].split(",")
         method = opts[0]

@@ -79,6 +79,7 @@ __all__ = [
     "albedo",
     "lobe_moments_normal_view",
     "splitsum_light_moments",
+    "view_direction",
     "sample_patch_mc",
 ]
 
@@ -357,6 +358,12 @@ def light_moments(quad: PatchQuadrature):
     second = jnp.einsum("...n,...ni,...nj->...ij", w, wi, wi, precision=hi) / a[..., None] * mask
     cov = second - mean[..., :, None] * mean[..., None, :]
     return mean, (cov + jnp.swapaxes(cov, -1, -2)) / 2
+
+
+def view_direction(theta_o):
+    """ω_o = (sin θ_o, 0, cos θ_o) (..., 3): the view in the frame of this module (n = z)."""
+    theta_o = jnp.asarray(theta_o)
+    return jnp.stack([jnp.sin(theta_o), jnp.zeros_like(theta_o), jnp.cos(theta_o)], axis=-1)
 
 
 def _vmapped(fn, *args):

@@ -33,7 +33,8 @@ from .film import Film
 from .filtered import filtered_bands
 from .improved import BinTable, bin_table, improved_kernel
 from .lut import ShatLUT, build_shat_lut
-from .microfacet import light_moments, patch_quadrature, sample_patch_mc, splitsum_light_moments
+from .microfacet import (light_moments, patch_quadrature, sample_patch_mc,
+                         splitsum_light_moments, view_direction)
 from .kernels import filtered_kernel, ideal_kernel
 from .opd import cos_incidence_from_projection, opd_moments_exact, project_light_moments
 from .options import ModelOptions, check_options
@@ -136,7 +137,7 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
         mean, cov = splitsum_light_moments(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
     else:
         mean, cov = light_moments(quad)
-    wo = jnp.stack([jnp.sin(theta_o), jnp.zeros_like(theta_o), jnp.cos(theta_o)])
+    wo = view_direction(theta_o)
     if method == "filtered_gt_opd":
         mu_c, _ = project_light_moments(wo, mean, cov)
         opd = opd_moments_exact(film, quad.cos_hi, quad.weight)
@@ -161,7 +162,7 @@ def _bare_patch(film, theta_o, alpha, quad, method, observer, o):
         mean, cov = splitsum_light_moments(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
     else:
         mean, cov = light_moments(quad)
-    wo = jnp.stack([jnp.sin(theta_o), jnp.zeros_like(theta_o), jnp.cos(theta_o)])
+    wo = view_direction(theta_o)
     mu_c, _ = project_light_moments(wo, mean, cov)
     return albedo * bands(cos_incidence_from_projection(mu_c))
 

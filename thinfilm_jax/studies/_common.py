@@ -10,6 +10,7 @@ import numpy as np
 
 from ..colorimetry import delta_e2000
 from ..film import Film
+from ..microfacet import view_direction
 from ._timing import Timing
 
 # name: (eta_film, eta_base, kappa_base, eta_outer)
@@ -151,7 +152,6 @@ def material_film(names, thickness) -> Film:
 
 
 def view_vector(cos_o):
-    """ω_o = (sin θ_o, 0, cos θ_o) (..., 3), the frame of `kernels.lobe_moments`."""
-    cos_o = jnp.asarray(cos_o)
-    sin_o = jnp.sqrt(jnp.maximum((1.0 - cos_o) * (1.0 + cos_o), 0.0))
-    return jnp.stack([sin_o, jnp.zeros_like(cos_o), cos_o], axis=-1)
+    """ω_o (..., 3) from cos θ_o: `microfacet.view_direction`, the frame of
+    `kernels.lobe_moments`."""
+    return view_direction(jnp.arccos(jnp.asarray(cos_o)))

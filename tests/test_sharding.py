@@ -120,6 +120,27 @@ def test_bad_arguments_name_the_argument():
         shard_batch(lambda a: a, np.zeros(3), in_axes=(1,))
     with pytest.raises(TypeError, match="map_sharded takes a function"):
         map_sharded(3)
+    with pytest.raises(ValueError, match="mode must be one of"):
+        map_sharded(lambda x: x, mode="pmap")
+
+
+def test_jit_mode_equals_shard_map_mode():
+    film, c, lam = _film(5), np.linspace(0.1, 1.0, 5), np.array([450.0, 650.0])
+    a = shard_batch(_airy, film, c, lam, in_axes=(0, 0, None), mode="jit")
+    b = shard_batch(_airy, film, c, lam, in_axes=(0, 0, None))
+    np.testing.assert_array_max_ulp(np.asarray(a), np.asarray(b), maxulp=MAX_ULP)
+
+
+def test_cli_devices_checked_before_work(tmp_path, capsys):
+    from thinfilm_jax.cli import main
+
+    n = len(jax.devices())
+    assert main(["figure7", "--devices", str(n + 1), "--out", str(tmp_path)]) == 1
+    assert f"devices must be an int in [1, {n}]" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["render", "--devices", "0", "--out", str(tmp_path)])
+    assert "argument --devices: must be an integer" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
 
 
 # ----------------------------------------------------------------------------- many devices
@@ -169,16 +190,37 @@ _CHILD = textwrap.dedent("""
             r = map_sharded(patch, devices=4)(film, t, a)
             rep["cases"]["patch/reference"] = {"ulp_vs_direct": ulp(to_host(r), direct),
                                                "n_devices": len(r.sharding.device_set)}
+        if FIT:  # a vmapped optimistix solve: mode="jit", XLA partitions the batch
+            import optimistix as optx
+
+            cos_f, lam_f = jnp.linspace(0.3, 1.0, 4), jnp.linspace(400.0, 700.0, 5)
+
+            def model(d):
+                return tf.airy_reflectance(tf.Film(d, 1.3, 2.0, 0.5), cos_f[:, None],
+                                           lam_f[None, :])
+
+            def fit_one(obs, d0):
+                sol = optx.least_squares(lambda d, o: model(d) - o,
+                                         optx.LevenbergMarquardt(1e-10, 1e-10), d0, args=obs,
+                                         throw=False, max_steps=100)
+                return sol.value
+
+            truth = np.linspace(200.0, 500.0, 6)
+            obs = np.stack([np.asarray(model(d)) for d in truth])
+            direct = np.asarray(jax.vmap(fit_one)(obs, truth + 15.0))
+            r = map_sharded(jax.vmap(fit_one), devices=4, mode="jit")(obs, truth + 15.0)
+            rep["cases"]["fit"] = {"ulp_vs_direct": ulp(to_host(r), direct),
+                                   "max_err_nm": float(np.max(np.abs(direct - truth)))}
     if jax.process_index() == 0:
         print("REPORT" + json.dumps(rep))
 """)
 
 
-def _run_children(n_processes, devices_each, cases, patch, timeout=180):
+def _run_children(n_processes, devices_each, cases, patch, fit, timeout=180):
     env = {k: v for k, v in os.environ.items() if not k.startswith(("XLA_", "JAX_"))}
     env.update(XLA_FLAGS=f"--xla_force_host_platform_device_count={devices_each}",
                JAX_PLATFORMS="cpu", PYTHONPATH=ROOT)
-    code = f"CASES = {cases!r}\nPATCH = {patch!r}\n" + _CHILD
+    code = f"CASES = {cases!r}\nPATCH = {patch!r}\nFIT = {fit!r}\n" + _CHILD
     if n_processes > 1:
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
@@ -229,17 +271,20 @@ def _check_report(rep, cases, total_devices):
     if "patch/reference" in got:
         assert got["patch/reference"]["n_devices"] == 4
         assert got["patch/reference"]["ulp_vs_direct"] <= MAX_ULP, got["patch/reference"]
+    if "fit" in got:  # the fit converged (to the truth) and the split did not change it
+        assert got["fit"]["max_err_nm"] < 1e-6 and got["fit"]["ulp_vs_direct"] <= MAX_ULP, \
+            got["fit"]
 
 
 def test_four_host_devices_match_one_device():
     """1, 2 and 4 devices, N = 10 (padded to a multiple of k) and 8, float64 and float32;
-    the Figure 7 reference kernel on 4 devices."""
-    rep = _run_children(1, 4, CASES_4, True)
+    the Figure 7 reference kernel and a batched fit (mode="jit") on 4 devices."""
+    rep = _run_children(1, 4, CASES_4, True, True)
     _check_report(rep, CASES_4, 4)
 
 
 def test_two_processes_match_one_device():
     """Multi-host: two processes × two host devices joined by jax.distributed (gloo)."""
-    rep = _run_children(2, 2, CASES_2x2, False)
+    rep = _run_children(2, 2, CASES_2x2, False, False)
     assert rep["processes"] == 2
     _check_report(rep, CASES_2x2, 4)

@@ -62,6 +62,11 @@ def _bench(args) -> int:
         from .studies.ibl_bench import run_ibl_bench
 
         run_ibl_bench(out=args.out, quick=args.quick)
+    if args.suite in ("scaling", "all"):
+        from .studies.scaling import QUICK, ScalingConfig, format_table, run_scaling
+
+        cfg = ScalingConfig(**(QUICK if args.quick else {}))
+        print(format_table(run_scaling(cfg, out_dir=args.out)))
     return 0
 
 
@@ -130,9 +135,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "run time) and measure its error; print a table, write JSON.")
     b.add_argument("--out", default="figures", help="output folder (default: figures)")
     b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
-    b.add_argument("--suite", choices=["core", "ibl", "all"], default="core",
+    b.add_argument("--suite", choices=["core", "ibl", "scaling", "all"], default="core",
                    help="core: error vs run time, peers, specialisation (default); ibl: the "
-                        "2560×1440 IBL frame and the real-time options' errors; all: both")
+                        "2560×1440 IBL frame and the real-time options' errors; scaling: the "
+                        "large jobs on 1, 2 and 4 devices (subprocesses); all: the three")
     b.set_defaults(func=_bench)
 
     from .envmap import SHIPPED

@@ -12,13 +12,23 @@ runs such a function with its leading (batch) axis split across the devices of a
    scalars) go to every device;
 3. the function runs under ``jax.jit(jax.shard_map(...))``: each device evaluates it on its
    own block, with no communication, so the result does not depend on k beyond the
-   rounding of XLA's per-block code (tests: identical to one device, ≤ 1 ulp);
+   rounding of XLA's per-block code (tests: the Airy and the patch reference are identical
+   to one device; a real-time IBL frame differs by ≤ 6 eps of its largest value, where XLA
+   fuses the smaller block's program differently);
 4. the padding is cut off; the result is a `jax.Array` sharded over the mesh (when k
    divides N), one block per device.
 
 The function must be *batch-elementwise*: row i of every output depends only on row i of the
 batched inputs (true of every public function of this package on batched `Film` fields and
 angles). It sees blocks of N/k rows, never the whole batch.
+
+``mode="jit"`` instead compiles ``jax.jit(fn, in_shardings=..., out_shardings=...)`` on the
+whole padded batch and lets XLA's SPMD partitioner split it. Use it for a function whose
+control flow couples the items, such as a `jax.vmap` of an optimistix solve (its loop runs
+until every item has converged: one all-reduce of the stopping test per step); optimistix
+and lineax do not run inside `jax.shard_map`. A `jax.lax.map` over the batch (the patch
+integrator, the IBL chunks) is what ``"shard_map"`` is for: the partitioner would not split
+its sequential loop.
 
 Which leaves are batched: for an argument with ``in_axes`` 0 (the default), every array leaf
 with at least one axis is split along its leading axis, which must have the same length N in
@@ -160,7 +170,10 @@ def _pad_place(x, pad: int, sharding):
     return jax.make_array_from_callback(x.shape, sharding, lambda idx: x[idx])
 
 
-def map_sharded(fn: Callable, *, in_axes=0, devices=None) -> Callable:
+MODES = ("shard_map", "jit")
+
+
+def map_sharded(fn: Callable, *, in_axes=0, devices=None, mode: str = "shard_map") -> Callable:
     """``fn`` mapped over a leading batch axis split across a 1-D mesh of devices.
 
     Returns a callable with the signature of ``fn`` (positional arguments) that pads the
@@ -176,15 +189,20 @@ def map_sharded(fn: Callable, *, in_axes=0, devices=None) -> Callable:
             replicated), None (every argument replicated) or a tuple of 0/None per argument.
         devices: None (every device), an int k (the first k), a sequence of devices or a
             1-D `Mesh` (`batch_mesh`).
+        mode: "shard_map" (each device runs ``fn`` on its block; the default) or "jit"
+            (XLA partitions ``fn`` over the whole batch; for a vmapped solver).
 
     Inside a trace (``jit``, ``grad``) the arguments are padded but not placed: the outer
     computation's sharding decides (gradients flow through, as through `jax.shard_map`).
     """
     if not callable(fn):
         raise TypeError(f"map_sharded takes a function, got {type(fn).__name__}")
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     mesh = batch_mesh(devices)
     k = mesh.size
     batched_sharding = NamedSharding(mesh, PartitionSpec(BATCH_AXIS))
+    replicated = NamedSharding(mesh, PartitionSpec())
     compiled: dict = {}
 
     def program(treedef, flags):
@@ -193,10 +211,16 @@ def map_sharded(fn: Callable, *, in_axes=0, devices=None) -> Callable:
             def flat_fn(*leaves):
                 return fn(*jax.tree_util.tree_unflatten(treedef, leaves))
 
-            specs = tuple(PartitionSpec(BATCH_AXIS) if b else PartitionSpec() for b in flags)
-            compiled[key] = jax.jit(jax.shard_map(flat_fn, mesh=mesh, in_specs=specs,
-                                                  out_specs=PartitionSpec(BATCH_AXIS),
-                                                  check_vma=False))
+            if mode == "jit":
+                compiled[key] = jax.jit(flat_fn, out_shardings=batched_sharding,
+                                        in_shardings=tuple(batched_sharding if b else
+                                                           replicated for b in flags))
+            else:
+                specs = tuple(PartitionSpec(BATCH_AXIS) if b else PartitionSpec()
+                              for b in flags)
+                compiled[key] = jax.jit(jax.shard_map(flat_fn, mesh=mesh, in_specs=specs,
+                                                      out_specs=PartitionSpec(BATCH_AXIS),
+                                                      check_vma=False))
         return compiled[key]
 
     @functools.wraps(fn)
@@ -222,13 +246,13 @@ def map_sharded(fn: Callable, *, in_axes=0, devices=None) -> Callable:
     return mapped
 
 
-def shard_batch(fn: Callable, *args, in_axes=0, devices=None):
-    """``map_sharded(fn, in_axes=in_axes, devices=devices)(*args)``: one call.
+def shard_batch(fn: Callable, *args, in_axes=0, devices=None, mode: str = "shard_map"):
+    """``map_sharded(fn, in_axes=in_axes, devices=devices, mode=mode)(*args)``: one call.
 
     Each call builds (and compiles) a new program; for a job split into chunks build the
     mapped function once with `map_sharded`.
     """
-    return map_sharded(fn, in_axes=in_axes, devices=devices)(*args)
+    return map_sharded(fn, in_axes=in_axes, devices=devices, mode=mode)(*args)
 
 
 def to_host(tree):

@@ -99,7 +99,7 @@ def test_constant_environment_reproduces_patch(alpha, constant):
     theta = np.array([0.0, 0.6, 1.1, 1.4])
     v = view_at(theta, phi=0.3)
     for method, env, tol in (("reference", constant[0], 2e-4), ("ideal", constant[1], 1.5e-3),
-                             ("filtered", constant[1], 1e-3)):
+                             ("filtered", constant[1], 1e-3), ("improved", constant[1], 1e-3)):
         got = np.asarray(envmap_radiance(FILM, alpha, Z, v, env, method=method))
         want = np.asarray(patch_radiance(FILM, theta, alpha, method=method))
         assert np.abs(got - want).max() < tol, (method, np.abs(got - want).max())
@@ -267,10 +267,10 @@ def test_float32_realtime_close_to_float64(forest):
 
 # ----------------------------------------------------------------------------- gradients
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
-@pytest.mark.parametrize("method", ["reference", "filtered"])
+@pytest.mark.parametrize("method", ["reference", "filtered", "improved"])
 def test_gradients_finite(method, dtype):
     env = load_envmap(downsample(load_envmap("venice_sunset"), 8).radiance)
-    pref = prefilter_envmap(env) if method == "filtered" else env
+    pref = prefilter_envmap(env) if method != "reference" else env
     if dtype == jnp.float32:
         pref = pref.astype(jnp.float32)
     v = view_at(np.array([0.0, 0.8, 1.45]), phi=1.0).astype(dtype)
@@ -294,14 +294,14 @@ def test_gradients_finite(method, dtype):
 
 
 # ----------------------------------------------------------------------------- float32 on GPU
-@pytest.mark.parametrize("method", ["reference", "mc", "ideal", "filtered"])
+@pytest.mark.parametrize("method", ["reference", "mc", "ideal", "filtered", "improved"])
 def test_contractions_state_their_precision(method):
     """No dot_general of the IBL paths may fall back to the backend default (TF32 on GPUs)."""
     from _precision import assert_contractions_precise, count_contractions
 
     env = load_envmap(np.ones((8, 16, 3)))
-    src = prefilter_envmap(env) if method in ("ideal", "filtered") else env
-    if method in ("ideal", "filtered"):
+    src = prefilter_envmap(env) if method in ("ideal", "filtered", "improved") else env
+    if method in ("ideal", "filtered", "improved"):
         src = src.astype(jnp.float32)
     f32 = FILM.astype(jnp.float32)
     v = view_at(np.array([0.2, 1.0])).astype(np.float32)
@@ -351,7 +351,8 @@ def test_stiff_inputs_finite_and_bounded(dtype):
     film = Film(*(c.astype(dtype) for c in cols[:4]))
     alpha, theta = cols[4].astype(dtype), cols[5]
     v = view_at(theta, phi=0.4).astype(dtype)
-    for method, src in (("ideal", pref), ("filtered", pref), ("reference", env)):
+    for method, src in (("ideal", pref), ("filtered", pref), ("improved", pref),
+                        ("reference", env)):
         if method == "reference" and dtype == jnp.float32:
             continue  # the reference is a float64 path
         def total(f, a, method=method, src=src):

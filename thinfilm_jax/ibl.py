@@ -9,6 +9,7 @@ $$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega
 | `mc`        | GGX visible-normal sampling (Heitz 2018), weight G₂/G₁, exact spectral R_jk per sample, nearest-texel radiance; fixed key and count |
 | `ideal`     | A(θ_o, α) · Σ_k R_jk(cos θ_o) P_k(ω_r, α): BB17 under the split sum (`kernels.ideal_kernel`, Ŝ from the LUT at σ = 0 by default) |
 | `filtered`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_r, α), R̄ = K 29 with the prefiltered moments μ_ω, Σ_ω (`kernels.filtered_kernel`) |
+| `improved`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_μ, α_eff): P at the lobe's tabulated mean direction and equal-variance level, R̄ = K 29 per equal-probability bin of cos θ₁, bins moved by the prefiltered moments (`improved.improved_envmap`, issue 11) |
 
 R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the per-channel
 ("diagonal") approximation L_j ≈ R_j P_j is the option `cross_band=False`.
@@ -36,6 +37,7 @@ from . import _validate as V
 from .airy import choose_arithmetic
 from .envmap import EnvMap, _row_geometry, load_envmap, lookup_nearest
 from .film import Film
+from .improved import bin_table, improved_envmap
 from .kernels import filtered_kernel, ideal_kernel
 from .lut import build_shat_lut
 from .microfacet import normal_distribution, smith_g1, smith_g2
@@ -46,7 +48,7 @@ from .reflectance import spectral_bands
 from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .uplift import cross_band_name
 
-METHODS = ("reference", "mc", "ideal", "filtered")
+METHODS = ("reference", "mc", "ideal", "filtered", "improved")
 REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST
 
@@ -65,7 +67,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         normal, view: unit world vectors (..., 3) (z-up); view points toward the eye.
         envmap: `EnvMap` (any method; real-time methods prefilter it on the host each call)
             or `PrefilteredEnvMap` (real-time methods only; build it once).
-        method: "reference" | "mc" | "ideal" | "filtered".
+        method: "reference" | "mc" | "ideal" | "filtered" | "improved".
         observer: colour bands.
         options: `ModelOptions` (default `REALTIME_OPTIONS`: shat="lut", the map's table):
             terms = Fourier orders M and shat = Ŝ source of the real-time methods,
@@ -104,7 +106,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
                                ("normal", np.zeros(np.shape(normal)[:-1])),
                                ("view", np.zeros(np.shape(view)[:-1]))])
     arithmetic = choose_arithmetic(film, options.arithmetic)
-    realtime = method in ("ideal", "filtered")
+    realtime = method in ("ideal", "filtered", "improved")
     if isinstance(envmap, PrefilteredEnvMap):
         if not realtime:
             raise ValueError(f"method={method!r} integrates the map itself: pass an EnvMap, "
@@ -121,6 +123,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
             raise ValueError("the PrefilteredEnvMap was built for another observer")
         cfg = (method, observer, terms, shat, bool(cross_band), arithmetic)
+        if method == "improved":  # its (θ_o, α) tables travel with the map
+            pref = (pref, bin_table(dtype=dtype))
         return _realtime_jit(Film(*args[:5]), args[5], *nv, pref, cfg,
                              int(batch_size or 65536))
     n_pts = int(np.prod(shape))
@@ -177,6 +181,13 @@ def _realtime_jit(film, alpha, normal, view, pref, cfg, chunk):
 
 def _realtime_points(film, alpha, normal, view, pref, cfg):
     method, observer, terms, shat, cross, arithmetic = cfg
+    if method == "improved":
+        pref, table = pref
+        lut = pref.lut if cross else (build_shat_lut(observer, dtype=alpha.dtype)
+                                      if shat == "lut" else None)
+        return improved_envmap(film, alpha, normal, view, pref, table, observer=observer,
+                               terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
+                               cross_band=cross)
     cos_o = jnp.sum(normal * view, axis=-1)
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)

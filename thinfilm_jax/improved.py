@@ -80,35 +80,44 @@ from jax import Array
 from .film import Film
 from .fresnel import complex_dtype, safe_div, safe_sqrt
 from .lut import ShatLUT
-from .microfacet import patch_quadrature
+from .microfacet import light_moments, patch_quadrature
 from .opd import opd_of_cos
 from .series import fourier_band_reflectance, series_terms
 from .spectra import DEFAULT_OBSERVER, sensitivity_ft, shat_at_zero
 
-__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_linear", "improved_bands",
-           "improved_kernel", "shift_bins", "splitsum_projection"]
+__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "lookup_normal_view",
+           "lookup_linear", "improved_bands", "improved_kernel", "improved_envmap", "shift_bins",
+           "splitsum_projection", "splitsum_projection_at"]
 
 DEFAULT_BINS = 2
 TABLE_SHAPE = (64, 33)  # (√cos θ_o, √α) nodes, as the albedo table
 TABLE_QUADRATURE = (96, 96)  # half-vector quadrature of the table build
-ALPHA_FLOOR = 1e-4  # √α = 0 is evaluated at this α (as `prefilter.albedo_table`)
+ALPHA_FLOOR = 1e-4  # quadrature floor of α (the √α = 0 column is the exact mirror limit)
 
 
 class BinTable(NamedTuple):
-    """Equal-probability bins of c = cos θ₁ under p_R (a pytree of one array).
+    """Tables of the lobe p_R of uniform light (a pytree of arrays), on uniform grids of
+    √cos θ_o and √α ∈ [0, 1] (the √α = 0 column is the mirror limit):
 
-    stats: (n_u, n_a, 2, K) on uniform grids of √cos θ_o and √α ∈ [0, 1]: [0] the offsets
-        c̄_k − cos θ_o of the bin means, [1] the bin standard deviations s_k.
+    stats: (n_u, n_a, 2, K): [0] offsets c̄_k − cos θ_o of the K equal-probability bin means
+        of c = cos θ₁, [1] the bin standard deviations s_k.
+    lobe: (n_u, n_a, 2): [0] β − θ_o, the angle from the mirror direction ω_r to the lobe's
+        mean light direction μ_ω/|μ_ω| (negative: towards n), [1] √α_eff, the roughness whose
+        normal-view lobe has the same total variance tr Σ_ω (the prefiltered level to read).
+    normal_view: (n_a, 2): (a, e_z) = (E⟨ω_i,n⟩, E⟨ω_i,n⟩²) of the normal-view lobe
+        (`microfacet.lobe_moments_normal_view`), for `splitsum_projection`.
     """
 
     stats: Array
+    lobe: Array
+    normal_view: Array
 
     @property
     def bins(self) -> int:
         return self.stats.shape[-1]
 
     def astype(self, dtype) -> BinTable:
-        return BinTable(self.stats.astype(dtype))
+        return BinTable(*(x.astype(dtype) for x in self))
 
 
 # ----------------------------------------------------------------------------- table
@@ -130,11 +139,16 @@ def _bin_stats(theta_o, alpha, bins, quadrature, ndf):
     var = safe_div(jnp.sum(part * (c[None] - mean[:, None]) ** 2, axis=-1), mass)
     cos_o = jnp.cos(theta_o)
     ok = mass > 0  # θ_o = 90°: no lobe; the bins sit at the view cosine
-    return jnp.stack([jnp.where(ok, mean - cos_o, 0.0), jnp.where(ok, jnp.sqrt(var), 0.0)])
+    stats = jnp.stack([jnp.where(ok, mean - cos_o, 0.0), jnp.where(ok, jnp.sqrt(var), 0.0)])
+    mu, cov = light_moments(q)  # frame n = z, ω_o = (sin θ_o, 0, cos θ_o): ω_r at −x
+    beta = jnp.arctan2(-mu[0], mu[2])
+    lobe = jnp.stack([jnp.where(total > 0, beta - theta_o, 0.0), jnp.trace(cov),
+                      mu[2], cov[2, 2] + mu[2] ** 2])
+    return stats, lobe
 
 
 @functools.cache
-def _bin_table_host(shape, bins, quadrature, ndf) -> np.ndarray:
+def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
     n_u, n_a = shape
     u = np.linspace(0.0, 1.0, n_u)
     sqa = np.linspace(0.0, 1.0, n_a)
@@ -142,9 +156,24 @@ def _bin_table_host(shape, bins, quadrature, ndf) -> np.ndarray:
     t, a = np.meshgrid(theta, np.maximum(sqa**2, ALPHA_FLOOR), indexing="ij")
     fn = jax.jit(jax.vmap(functools.partial(_bin_stats, bins=bins, quadrature=quadrature,
                                             ndf=ndf)))
-    rows = [np.asarray(fn(jnp.asarray(t[i], jnp.float64), jnp.asarray(a[i], jnp.float64)))
-            for i in range(n_u)]
-    return np.stack(rows)  # (n_u, n_a, 2, K)
+    dt = jnp.result_type(float)  # float64 when enabled
+    rows = [jax.tree.map(lambda x: np.asarray(x, np.float64),
+                         fn(jnp.asarray(t[i], dt), jnp.asarray(a[i], dt))) for i in range(n_u)]
+    stats = np.stack([r[0] for r in rows])  # (n_u, n_a, 2, K)
+    lobe = np.stack([r[1] for r in rows])  # (n_u, n_a, 4): β − θ_o, tr Σ, a, e_z
+    # √α_eff: invert tr Σ of the normal-view lobe (θ_o = 0, increasing in α) on a fine grid
+    sqa_f = np.linspace(0.0, 1.0, 257)
+    tr0 = np.asarray(fn(jnp.zeros(257, dt), jnp.asarray(np.maximum(sqa_f**2, ALPHA_FLOOR),
+                                                        dt))[1][:, 1], np.float64).copy()
+    tr0[0] = 0.0
+    tr0 = np.maximum.accumulate(tr0)
+    sqa_eff = np.interp(lobe[..., 1], tr0, sqa_f)
+    normal_view = lobe[-1, :, 2:].copy()  # u = 1 row: θ_o = 0
+    normal_view[0] = 1.0
+    stats[:, 0] = 0.0  # √α = 0 is the mirror limit itself: every bin at cos θ_o, no spread
+    out_lobe = np.stack([lobe[..., 0], sqa_eff], axis=-1)
+    out_lobe[:, 0] = 0.0
+    return stats, out_lobe, normal_view
 
 
 def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
@@ -154,12 +183,13 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
 
     Args:
         bins: K ≥ 1 equal-probability bins of cos θ₁.
-        shape: (n_u, n_a) nodes in √cos θ_o and √α (√α = 0 is evaluated at α = 1e-4).
+        shape: (n_u, n_a) nodes in √cos θ_o and √α (√α = 0: the mirror limit, offsets and
+            spreads 0).
         quadrature: (n_u, n_φ) of the half-vector quadrature of each node.
         ndf: "ggx" or "beckmann".
         dtype: float dtype of the table.
-    Cost: n_u · n_a quadratures of n_u·n_φ nodes (a few seconds on a CPU for the default).
-    Needs float64 enabled (the table is computed in float64).
+    Cost: n_u · n_a quadratures of n_u·n_φ nodes (≈ 10 s on a 2-core CPU for the default,
+    once per process). Computed in float64 when enabled, else in float32.
     """
     from . import _validate as V
 
@@ -167,10 +197,8 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
     shape = tuple(V.check_int(f"shape[{i}]", s, 2) for i, s in enumerate(shape))
     quadrature = V.check_quadrature(quadrature)
     V.check_choice("ndf", ndf, ("ggx", "beckmann"))
-    if not jax.config.jax_enable_x64:
-        raise RuntimeError("bin_table builds in float64: jax.config.update('jax_enable_x64', "
-                           "True)")
-    return BinTable(jnp.asarray(_bin_table_host(shape, bins, quadrature, ndf), dtype))
+    host = _bin_table_host(shape, bins, quadrature, ndf, bool(jax.config.jax_enable_x64))
+    return BinTable(*(jnp.asarray(x, dtype) for x in host))
 
 
 def _bilinear(tab, x, y):
@@ -198,19 +226,53 @@ def lookup_bins(table: BinTable, cos_o, alpha):
     return jnp.clip(cos_o[..., None] + st[..., 0, :], 0.0, 1.0), st[..., 1, :]
 
 
-# ----------------------------------------------------------------------------- environment
-def splitsum_projection(cos_o, ez_a):
-    """(μ_x⁰, σ_x⁰²) of x = ⟨ω_i, ω_o⟩ under the split-sum lobe of a constant map.
+def lookup_lobe(table: BinTable, normal, view, cos_o, alpha):
+    """(direction (..., 3), √α_eff (...)) at which to read the prefiltered radiance: ω_r
+    rotated towards n by the tabulated angle to the lobe's mean light direction, and the
+    level of equal total variance (`BinTable.lobe`). World vectors; cos_o = ⟨n, ω_o⟩ > 0."""
+    st = _bilinear(table.lobe, safe_sqrt(cos_o), safe_sqrt(alpha))
+    refl = 2.0 * cos_o[..., None] * normal - view
+    b = normal - cos_o[..., None] * refl  # ⟨n, ω_r⟩ = cos θ_o: b ⟂ ω_r, |b| = sin θ_o
+    nb = safe_sqrt(jnp.sum(b * b, axis=-1, keepdims=True))
+    b = safe_div(b, nb)
+    db = st[..., 0:1]
+    d = jnp.cos(db) * refl - jnp.sin(db) * b
+    # the equirect lookup's (φ, θ) have no derivative at the poles (arctan2(0, 0)); there the
+    # direction is ω_r = ±z (normal view of a z normal) and Δβ = 0: pass no gradient through
+    pole = (d[..., 0] == 0) & (d[..., 1] == 0)
+    return jnp.where(pole[..., None], jax.lax.stop_gradient(d), d), st[..., 1]
 
-    The prefiltered lobe is the normal-view lobe rotated onto ω_r (`microfacet.
-    splitsum_light_moments`): μ = a ω_r, Σ = e_t(I − ω_rω_rᵀ) + e_z ω_rω_rᵀ − μμᵀ with
-    (a, e_z) = `ez_a` = E[⟨ω_i,n⟩], E[⟨ω_i,n⟩²] at θ_o = 0 and e_t = (1 − e_z)/2. With
-    ⟨ω_o, ω_r⟩ = 2cos²θ_o − 1 =: r, μ_x⁰ = a r and σ_x⁰² = e_t(1 − r²) + e_z r² − a² r².
+
+def lookup_normal_view(table: BinTable, alpha):
+    """(a, e_z) of the normal-view lobe at α (`BinTable.normal_view`, linear in √α)."""
+    nv = table.normal_view
+    n = nv.shape[0]
+    t = jnp.clip(safe_sqrt(alpha), 0.0, 1.0) * (n - 1)
+    i = jnp.clip(jnp.floor(t), 0, n - 2)
+    f = (t - i)[..., None]
+    i = i.astype(jnp.int32)
+    v = nv[i] * (1 - f) + nv[i + 1] * f
+    return v[..., 0], v[..., 1]
+
+
+# ----------------------------------------------------------------------------- environment
+def splitsum_projection_at(r, ez_a):
+    """(μ_x⁰, σ_x⁰²) of x = ⟨ω_i, ω_o⟩ under the split-sum lobe of a constant map centred
+    on a direction ω_c with ⟨ω_o, ω_c⟩ = r.
+
+    The prefiltered lobe is the normal-view lobe rotated onto ω_c (`microfacet.
+    splitsum_light_moments`): μ = a ω_c, Σ = e_t(I − ω_cω_cᵀ) + e_z ω_cω_cᵀ − μμᵀ with
+    (a, e_z) = `ez_a` = E[⟨ω_i,n⟩], E[⟨ω_i,n⟩²] at θ_o = 0 and e_t = (1 − e_z)/2, so
+    μ_x⁰ = a r and σ_x⁰² = e_t(1 − r²) + (e_z − a²) r².
     """
     a, ez = ez_a
-    r = 2.0 * cos_o * cos_o - 1.0
     et = (1.0 - ez) / 2.0
     return a * r, jnp.maximum(et * (1.0 - r * r) + (ez - a * a) * r * r, 0.0)
+
+
+def splitsum_projection(cos_o, ez_a):
+    """`splitsum_projection_at` for the mirror direction ω_r: r = 2cos²θ_o − 1."""
+    return splitsum_projection_at(2.0 * cos_o * cos_o - 1.0, ez_a)
 
 
 def shift_bins(cos_bins, std_bins, mu_x, var_x, mu_x0, var_x0):
@@ -305,3 +367,60 @@ def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,
     cb, sb = lookup_bins(table, cos_o, alpha)
     return improved_bands(film, cb, sb, observer, terms=terms, shat=shat, lut=lut,
                           arithmetic=arithmetic)
+
+
+def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
+                    observer=DEFAULT_OBSERVER, terms: int = 2, shat: str = "lut",
+                    lut: ShatLUT | None = None, arithmetic: str = "complex",
+                    cross_band: bool = True) -> Array:
+    r"""`envmap_radiance(method="improved")` at shading points: L_j (..., J), 0 where ⟨n,ω_o⟩ ≤ 0.
+
+    $$ L_j = A(\theta_o,\alpha)\sum_k \bar R_{jk}\,P_k(\omega_\mu, \alpha_\mathrm{eff}) $$
+
+    * P at the lobe's mean light direction ω_μ and the level α_eff of equal total variance
+      (`lookup_lobe`), not at (ω_r, α): the split-sum lobe centred on ω_r is the wrong
+      lobe away from normal view (rough or grazing), and that error exceeds the film's;
+    * R̄_jk = `improved_bands` on the uniform-light bins moved by `shift_bins` with the
+      prefiltered moments read at the same (ω_μ, α_eff) against those of a constant map
+      there (μ_x⁰ = a⟨ω_o, ω_μ⟩, σ_x⁰² from (a, e_z) of the normal-view lobe at α_eff):
+      a constant environment gives the uniform-light model exactly.
+
+    Args:
+        film: `Film` broadcasting with the shading points.
+        alpha: GGX α (...).
+        normal, view: unit world vectors (..., 3).
+        pref: `prefilter.PrefilteredEnvMap` (luminance or per-channel moments; per-channel
+            moments are averaged over the channels).
+        table: `bin_table(...)`.
+        observer: plain band name (the cross bands are used when `cross_band`).
+        terms, shat, lut, arithmetic: as `improved_bands`; `lut` must hold the bands used
+            (the map's cross-band table when `cross_band`).
+        cross_band: R_jk under RGB light (SPEC §9) or the diagonal R_j P_j.
+    """
+    from .opd import project_light_moments
+    from .prefilter import lookup_albedo, lookup_prefiltered, moments_to_mean_cov
+    from .uplift import cross_band_name
+
+    cos_o = jnp.sum(normal * view, axis=-1)
+    up = cos_o > 0
+    co = jnp.where(up, cos_o, 1.0)
+    a = lookup_albedo(pref, co, safe_sqrt(alpha))
+    dirn, sqa_eff = lookup_lobe(table, normal, view, co, alpha)
+    rad, mom = lookup_prefiltered(pref, dirn, sqa_eff)
+    if mom.ndim > rad.ndim:  # per-channel moments (..., 3, 9)
+        mom = jnp.mean(mom, axis=-2)
+    mean, cov = moments_to_mean_cov(mom)
+    mu_x, var_x = project_light_moments(view, mean, cov)
+    r_mu = jnp.sum(view * dirn, axis=-1)
+    mu_x0, var_x0 = splitsum_projection_at(r_mu, lookup_normal_view(table, sqa_eff**2))
+    cb, sb = lookup_bins(table, co, alpha)
+    cb, sb = shift_bins(cb, sb, mu_x, var_x, mu_x0, var_x0)
+    obs = cross_band_name(observer) if cross_band else observer
+    r = improved_bands(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,
+                       arithmetic=arithmetic)
+    if cross_band:
+        out = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * rad[..., None, :], axis=-1)
+    else:
+        out = r * rad
+    return jnp.where(up[..., None], a[..., None] * out, 0.0)
+

@@ -1,0 +1,181 @@
+"""`method="improved"` (issue 11, thinfilm_jax/improved.py): K 29 per equal-probability bin.
+
+Physics checks: the bins reproduce the lobe's moments of cos θ₁ (law of total variance),
+collapse to `ideal` as α → 0, converge to the reference as the number of bins grows, the
+bilinear Ŝ read stays within its stated error of the exact quadrature, a constant
+environment reproduces the uniform-light patch, and values and gradients stay finite in
+float32 and float64 down to the edges of the domain. Tables here are small (16 × 9 nodes,
+24² quadrature) to keep the file fast; the default table is exercised through
+`patch_radiance`.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from thinfilm_jax import Film, ModelOptions, patch_radiance
+from thinfilm_jax.improved import (_bin_stats, bin_table, improved_bands, improved_kernel,
+                                   lookup_linear, shift_bins)
+from thinfilm_jax.kernels import ideal_kernel
+from thinfilm_jax.lut import build_shat_lut
+from thinfilm_jax.microfacet import patch_quadrature
+from thinfilm_jax.reflectance import spectral_bands
+from thinfilm_jax.spectra import shat_host
+
+FIG7 = Film(600.0, 1.3, 2.0, 0.5)
+SMALL = dict(shape=(16, 9), quadrature=(24, 24))
+
+
+def _lobe_c_moments(theta, alpha, q=64):
+    quad = patch_quadrature(theta, alpha, quadrature=(q, q))
+    c, w = np.asarray(quad.cos_hi), np.asarray(quad.weight)
+    p = w / w.sum()
+    mean = (p * c).sum()
+    return mean, (p * (c - mean) ** 2).sum()
+
+
+@pytest.mark.parametrize("theta,alpha", [(0.3, 0.1), (1.2, 0.5), (1.5, 0.9)])
+def test_bins_reproduce_lobe_moments(theta, alpha):
+    """E c = mean of the bin means; Var c = mean of (s_k² + (c̄_k − E c)²) (total variance),
+    against the quadrature's own moments of c."""
+    mean, var = _lobe_c_moments(theta, alpha)
+    for k in (1, 2, 3):
+        st = np.asarray(_bin_stats(jnp.asarray(theta), jnp.asarray(alpha), k, (64, 64),
+                                   "ggx")[0])
+        cb = st[0] + np.cos(theta)
+        np.testing.assert_allclose(cb.mean(), mean, atol=1e-12)
+        np.testing.assert_allclose((st[1] ** 2 + (cb - mean) ** 2).mean(), var, rtol=1e-9,
+                                   atol=1e-15)
+        assert np.all(np.diff(cb) > 0)  # bins ordered, equal probability
+
+
+def test_identical_bins_without_spread_are_ideal():
+    """K identical bins with s = 0 are BB17 at that angle, exactly (K 29 with σ_D = 0)."""
+    c = np.linspace(0.05, 1.0, 7)
+    want = np.asarray(ideal_kernel(FIG7, c, shat="exact"))
+    cb = np.repeat(c[:, None], 3, axis=1)
+    got = np.asarray(jax.jit(lambda c: improved_bands(FIG7, c, jnp.zeros_like(c),
+                                                      shat="exact"))(cb))
+    np.testing.assert_allclose(got, want, atol=1e-13)
+
+
+def test_alpha_to_zero_gives_ideal():
+    """α → 0: every bin collapses onto cos θ_o (offsets tabulated from cos θ_o)."""
+    tab = bin_table(**SMALL)
+    c = np.cos(np.linspace(0.0, 1.5, 6))
+    want = np.asarray(ideal_kernel(FIG7, c, shat="exact"))
+    got = np.asarray(jax.jit(lambda c: improved_kernel(FIG7, c, 1e-8, tab, shat="exact"))(c))
+    np.testing.assert_allclose(got, want, atol=1e-4)  # grazing: ∂R/∂c ≈ 5, offsets ~1e-5
+    # and through patch_radiance (A → 1): the mirror limit of the `ideal` method
+    t = np.array([0.2, 0.9])
+    opts = ModelOptions(quadrature=(32, 32))
+    ideal = np.asarray(patch_radiance(FIG7, t, 1e-4, method="ideal", options=opts))
+    imp = np.asarray(patch_radiance(FIG7, t, 1e-4, method="improved", options=opts))
+    np.testing.assert_allclose(imp, ideal, atol=2e-4)
+
+
+@jax.jit
+def _bands_m8(cb, sb):
+    return improved_bands(FIG7, cb, sb, terms=8, shat="exact")
+
+
+def test_converges_to_the_reference_with_bins():
+    """More bins → the exact lobe average (M = 8 so that truncation does not hide it)."""
+    theta, alpha = 1.1, 0.5
+    quad = patch_quadrature(theta, alpha, quadrature=(64, 64))
+    w = np.asarray(quad.weight)
+    ref = w @ np.asarray(spectral_bands(FIG7, quad.cos_hi)) / w.sum()
+    errs = []
+    for k in (1, 2, 4, 8):
+        st = _bin_stats(jnp.asarray(theta), jnp.asarray(alpha), k, (64, 64), "ggx")[0]
+        r = _bands_m8(st[0] + np.cos(theta), st[1])
+        errs.append(float(np.abs(np.asarray(r) - ref).max()))
+    assert all(b < a for a, b in zip(errs, errs[1:])), errs
+    assert errs[-1] < 0.1 * errs[0], errs
+
+
+def test_beats_filtered_on_a_rough_grazing_grid():
+    """The issue's gain, on a small grid where K 29's Jensen bias is large."""
+    from thinfilm_jax.colorimetry import delta_e2000
+
+    t, a = np.meshgrid(np.deg2rad([30.0, 65.0, 82.0]), [0.25, 0.6])
+    opts = ModelOptions(quadrature=(32, 32))
+    ref = np.asarray(patch_radiance(FIG7, t, a, options=opts))
+    de = {m: np.asarray(delta_e2000(np.asarray(patch_radiance(FIG7, t, a, method=m,
+                                                              options=opts)), ref))
+          for m in ("filtered", "improved")}
+    assert de["improved"].mean() < 0.5 * de["filtered"].mean(), de
+    assert de["improved"].max() < de["filtered"].max(), de
+
+
+def test_lookup_linear_matches_exact_shat():
+    """Bilinear read of the demodulated table: ≤ 3e-3 of the exact Ŝ (module docstring),
+    Ŝ(−μ) = conj Ŝ(μ), 0 beyond μ_max."""
+    lut = build_shat_lut()
+    rng = np.random.default_rng(1)
+    mu = rng.uniform(-float(lut.mu_max), float(lut.mu_max), 4000)
+    sig = rng.uniform(0.0, 600.0, 4000) * rng.choice([0.0, 0.1, 1.0], 4000)
+    got = np.asarray(lookup_linear(lut, mu, sig))
+    assert np.abs(got - shat_host(mu, sig**2)).max() < 3e-3
+    np.testing.assert_allclose(np.asarray(lookup_linear(lut, -mu, sig)), np.conj(got),
+                               atol=1e-15)
+    assert np.all(np.asarray(lookup_linear(lut, 1.01 * float(lut.mu_max), 0.0)) == 0)
+
+
+def test_shift_bins_identity_for_the_uniform_lobe():
+    cb = jnp.asarray([[0.3, 0.6], [0.7, 0.95]])
+    sb = jnp.asarray([[0.05, 0.1], [0.02, 0.01]])
+    mu, var = jnp.asarray([0.1, 0.5]), jnp.asarray([0.2, 0.01])
+    c2, s2 = shift_bins(cb, sb, mu, var, mu, var)
+    np.testing.assert_allclose(np.asarray(c2), np.asarray(cb), atol=1e-14)
+    np.testing.assert_allclose(np.asarray(s2), np.asarray(sb), atol=1e-15)
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_finite_gradients_at_the_edges(dtype):
+    """Values in [A Σ W⁻, A Σ W⁺]-like bounds and finite gradients w.r.t. every input, at
+    d = 0, θ_o = 0 and π/2, α = 1e-4 and 1, absorbing and dielectric bases, LUT and exact Ŝ."""
+    tab = bin_table(**SMALL).astype(dtype)
+    lut = build_shat_lut(dtype=dtype)
+    d, c, a, k = np.meshgrid([0.0, 1e-6, 600.0, 1e4], [0.0, 1e-7, 0.5, 1.0], [1e-4, 0.3, 1.0],
+                             [0.0, 3.0], indexing="ij")
+    args = [jnp.asarray(x.ravel(), dtype) for x in (d, c, a, k)]
+
+    def f(d, c, a, k):  # both Ŝ sources stacked: one compile
+        film = Film(d, jnp.asarray(1.4, dtype), jnp.asarray(1.7, dtype), k)
+        return jnp.stack([improved_kernel(film, c, a, tab, shat=s, lut=lut)
+                          for s in ("lut", "exact")])
+
+    (_, v), grads = jax.jit(jax.value_and_grad(lambda *xs: (jnp.sum(f(*xs)), f(*xs)),
+                                               argnums=(0, 1, 2, 3), has_aux=True))(*args)
+    v = np.asarray(v)
+    assert v.dtype == dtype and np.all(np.isfinite(v))
+    assert np.all(v > -0.05) and np.all(v < 1.05), (v.min(), v.max())
+    for g in grads:
+        assert g.dtype == dtype and np.all(np.isfinite(np.asarray(g)))
+
+
+def test_gradient_matches_finite_differences():
+    """check_grads (float64, exact Ŝ) at an interior point: thickness, η₂, cos θ_o, α."""
+    from jax.test_util import check_grads
+
+    tab = bin_table(**SMALL)
+
+    @jax.jit
+    def f(x):
+        film = Film(x[0], x[1], 2.0, 0.5)
+        return improved_kernel(film, x[2], x[3], tab, shat="exact")
+
+    check_grads(f, (jnp.asarray([612.3, 1.31, 0.567, 0.271]),), order=1, modes=("rev",),
+                eps=1e-6, atol=1e-5, rtol=1e-5)
+
+
+def test_patch_float32_matches_float64():
+    t, a = np.deg2rad(np.array([10.0, 60.0, 85.0])), np.array([0.05, 0.3, 0.8])
+    opts = ModelOptions(quadrature=(24, 24), shat="lut")
+    v64 = np.asarray(patch_radiance(FIG7, t, a, method="improved", options=opts))
+    v32 = np.asarray(patch_radiance(FIG7.astype(jnp.float32), t.astype(np.float32),
+                                    a.astype(np.float32), method="improved", options=opts))
+    assert v32.dtype == np.float32
+    np.testing.assert_allclose(v32, v64, atol=2e-5)

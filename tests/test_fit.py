@@ -78,6 +78,18 @@ def test_single_start_finds_wrong_fringe(fig7_obs):
                      **kw)
     assert abs(float(multi.film.thickness) - 600.0) < 10.0  # filtered is biased by ~3 nm
     assert float(one.loss) > 10 * float(multi.loss)
+    # runner-ups: other fringe orders, reported with their loss gap; the data tell them
+    # apart (Δχ² ≫ 9) ...
+    ru = multi.runner_ups
+    assert ru and all(abs(r["params"]["thickness"] - float(multi.film.thickness)) > 100.0
+                      for r in ru)
+    assert all(r["loss"] > float(multi.loss) and r["dchi2"] > 100.0 for r in ru)
+    assert not multi.ambiguous
+    # ... unless the noise is as large as the signal (same compiled fit)
+    rng = np.random.default_rng(1)
+    noisy = np.abs(fig7_obs + 0.5 * fig7_obs.std() * rng.standard_normal(fig7_obs.shape))
+    vague = fit_film(noisy, THETA, initial=FIG7._replace(thickness=350.0), options=opts, **kw)
+    assert vague.ambiguous and min(r["dchi2"] for r in vague.runner_ups) < 9.0
 
 
 @pytest.mark.slow

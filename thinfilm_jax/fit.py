@@ -22,7 +22,7 @@ so the solver can never leave the physical domain (d ≥ 0, η ∈ [1, 4], κ �
 **Fringe order.** The loss is multimodal in thickness: neighbouring minima are one
 interference order apart (~220 nm for RGB patches of an η₂ = 1.3 film; see
 `notebooks/fitting.ipynb`), and a local solver started a few hundred nm away stops in the
-wrong one. When the thickness is free the solve is multi-start, in three stages:
+wrong one. When the thickness is free the solve is multi-start, in these stages:
 
 1. *screen*: the loss at `n_starts` thicknesses (default 64: midpoints of equal cells of the
    thickness box, 31 nm apart over [0, 2000] nm, so every ~±100 nm basin holds several) plus
@@ -31,7 +31,19 @@ wrong one. When the thickness is free the solve is multi-start, in three stages:
    the screened loss along the grid), `start_steps` (50) solver steps each, all free
    parameters moving (a wrong η₂ guess shifts every fringe: the solves slide along the
    d–η₂ valley); their results are ranked by the loss of the *final* model;
-3. *final solve* from the best, to convergence (`max_steps`), under the implicit adjoint.
+2b. *fringe order, explicitly*: from the best short solve, starts ±1 … ±`n_orders` (2)
+   interference orders away in thickness, Δd = λ̄ / (2 η₂ ⟨cos θ₂⟩) (λ̄ the observer's mean
+   band centroid), short-solved in a second round of the same batch. The screen alone
+   missed 3 of 80 noise-free films of the issue-13 set (d 150–1200 nm, η₂ 1.2–1.7, six
+   views 0–70°, one initial guess d = 500 nm, η₂ = 1.4): each landed one order too thick
+   with η₂ nearly right (d 805 → 1003, 1170 → 1370, 981 → 1171 nm); with this stage all
+   three are found (`python -m thinfilm_jax.studies.coverage`).
+3. *polish*: the 1 + `n_alternatives` (3) best *distinct* minima (thickness more than a
+   quarter order apart), ranked by the final model, are solved to convergence with it
+   (`max_steps`, implicit adjoint); the best is the answer, the others are reported as
+   runner-ups (`FitResult.runner_up_params`, `.runner_up_loss`, `.runner_up_dchi2` =
+   Δχ² against the answer) and `FitResult.ambiguous` flags a runner-up with Δχ² < 9 (the
+   data cannot tell the fringe orders apart).
 
 A full solve from every one of 64 starts would cost ~5 model evaluations per step and
 start; screening costs one per start. Stages 1–2 use the start model: `method` at the
@@ -88,6 +100,7 @@ from .film import Film
 from .filtered import SHAT_SOURCES
 from .fresnel import film_interfaces
 from .lut import build_shat_lut
+from .options import ModelOptions
 from .patch import METHODS, patch_one
 from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 
@@ -119,6 +132,8 @@ SOLVERS = {
 }
 
 DEGENERATE_CORRELATION = 0.95
+#: Runner-up minima closer than this in Δχ² make a fit `FitResult.ambiguous`.
+AMBIGUOUS_DCHI2 = 9.0
 BATCHING = ("auto", "vmap", "map")
 _START_MARGIN = 5e-3  # starting points at least this fraction of the box inside it
 
@@ -149,7 +164,11 @@ class FitOptions:
             row, at least 8).
         starts: explicit thickness guesses (nm) instead of the spread.
         start_steps: solver steps of each short solve.
-        max_steps: solver steps of the final solve.
+        max_steps: solver steps of the final solve (and of each polish).
+        n_orders: fringe orders either side of the best short solve that are solved
+            explicitly (thickness ± k Δd, k = 1 … n_orders; 0: none; module docstring).
+        n_alternatives: runner-up minima polished with the final model and reported
+            (`FitResult.runner_up_params`, `FitResult.ambiguous`).
         rtol, atol: solver tolerances (on the unconstrained parameters and the loss).
         bounds: {name: (lo, hi)} overriding `DEFAULT_BOUNDS` (stored as a sorted tuple of
             pairs; `bounds_dict` gives the dict back).
@@ -195,6 +214,8 @@ class FitOptions:
     quadrature: tuple = (16, 16)
     start_quadrature: tuple | None = (8, 8)
     ndf: str = "ggx"
+    n_orders: int = 2
+    n_alternatives: int = 2
 
     def __post_init__(self):
         put = functools.partial(object.__setattr__, self)
@@ -206,6 +227,8 @@ class FitOptions:
         put("n_eta_starts", V.check_int("n_eta_starts", self.n_eta_starts, 0))
         put("start_steps", V.check_int("start_steps", self.start_steps, 1))
         put("max_steps", V.check_int("max_steps", self.max_steps, 1))
+        put("n_orders", V.check_int("n_orders", self.n_orders, 0))
+        put("n_alternatives", V.check_int("n_alternatives", self.n_alternatives, 0))
         for name in ("rtol", "atol"):
             v = getattr(self, name)
             if isinstance(v, bool) or not (isinstance(v, int | float | np.floating)
@@ -288,6 +311,14 @@ class FitResult(NamedTuple):
             initial guess last).
         start_loss: (N,) loss of the start model at each of them.
         solution: the `optx.Solution` of the final solve (`.value` is unconstrained y).
+        runner_up_params: (K, p) the next-best distinct local minima found (K =
+            `FitOptions.n_alternatives`; physical, in the order `free`), best first; a
+            neighbouring fringe order is usually among them.
+        runner_up_loss: (K,) their loss ½Σr² (inf: no further distinct minimum found).
+        runner_up_dchi2: (K,) Δχ² = (Σr²(runner-up) − Σr²(answer)) / s², with s² as for the
+            standard errors: how much worse the data say each runner-up is. Under Gaussian
+            noise, Δχ² < `AMBIGUOUS_DCHI2` (9) means a likelihood ratio below e^4.5 ≈ 90:
+            see `ambiguous`.
     """
 
     film: Film
@@ -302,6 +333,28 @@ class FitResult(NamedTuple):
     start_params: Array
     start_loss: Array
     solution: optx.Solution
+    runner_up_params: Array
+    runner_up_loss: Array
+    runner_up_dchi2: Array
+
+    @property
+    def ambiguous(self) -> bool:
+        """True when a runner-up minimum (typically another fringe order) fits the data
+        almost as well, Δχ² < `AMBIGUOUS_DCHI2`: the data cannot tell them apart, and the
+        standard errors (local to one minimum) understate the uncertainty."""
+        return bool(np.any(np.asarray(self.runner_up_dchi2) < AMBIGUOUS_DCHI2))
+
+    @property
+    def runner_ups(self) -> list[dict]:
+        """The runner-up minima as [{"params": {name: value}, "loss": ..., "dchi2": ...}]
+        (only those found), best first."""
+        out = []
+        for xk, lk, ck in zip(np.asarray(self.runner_up_params), np.asarray(self.runner_up_loss),
+                              np.asarray(self.runner_up_dchi2)):
+            if np.isfinite(lk):
+                out.append({"params": dict(zip(self.free, map(float, xk))), "loss": float(lk),
+                            "dchi2": float(ck)})
+        return out
 
     @property
     def params(self) -> dict:
@@ -342,6 +395,10 @@ class FitResult(NamedTuple):
             "steps": int(self.steps),
             "residuals": lst(self.residuals),
             "n_starts_screened": int(np.shape(self.start_loss)[0]),
+            "runner_ups": [{"params": {k: f(v) for k, v in ru["params"].items()},
+                            "loss": f(ru["loss"]), "dchi2": f(ru["dchi2"])}
+                           for ru in self.runner_ups],
+            "ambiguous": self.ambiguous,
         }
 
 
@@ -349,16 +406,17 @@ class FitResult(NamedTuple):
 def patch_model(film: Film, theta_o, alpha, *, method: str = "reference",
                 observer: str = DEFAULT_OBSERVER, terms: int = 2, shat: str = "exact", lut=None,
                 quadrature: tuple[int, int] = (16, 16), ndf: str = "ggx",
-                base: str = "general") -> Array:
+                arithmetic: str = "complex") -> Array:
     """L_j at each view angle: `patch_one` vmapped over `theta_o` (n_angles,) → (n_angles, J).
 
     Scalar film fields and α; no validation (jit- and vmap-safe): the fit's forward model.
     """
-    n_u, n_phi = quadrature
+    options = ModelOptions(terms=terms, shat=shat, ndf=ndf, quadrature=tuple(quadrature),
+                           arithmetic=arithmetic)
 
     def one(t):
-        return patch_one(film, t, alpha, method=method, observer=observer, terms=terms,
-                         shat=shat, lut=lut, n_u=n_u, n_phi=n_phi, ndf=ndf, base=base)
+        return patch_one(film, t, alpha, method=method, observer=observer, options=options,
+                         lut=lut)
 
     return jax.vmap(one)(jnp.asarray(theta_o))
 
@@ -369,7 +427,7 @@ def spectrum_model(film: Film, cos_theta, wavelength) -> Array:
     Scalar film fields; general (complex) Fresnel path; no validation.
     """
     c = jnp.asarray(cos_theta)[:, None]
-    ifc = film_interfaces(film, c, base="general")
+    ifc = film_interfaces(film, c, arithmetic="complex")
     return jnp.mean(polarised_reflectance(ifc, film.thickness, jnp.asarray(wavelength)[None, :]),
                     axis=0)
 
@@ -466,15 +524,27 @@ def _strip(sol):
                          state=None)
 
 
-def _pipeline(res_start, res_final, y_starts, args, cfg):
-    """Screen the starts, run short solves from the best few, solve the best to convergence.
+def _pipeline(res_start, res_final, y_starts, args, cfg, orders=None, distinct=None):
+    """Screen the starts, run short solves from the best few, resolve the fringe order,
+    polish the best distinct minima with the final model and keep the best.
 
-    Stages 1–2 use the cheap start model `res_start` and carry no gradient; the results of
-    the short solves are ranked by the final model `res_final`, and the best is solved to
-    convergence with it (stage 3, under optimistix's implicit adjoint).
+    Stages 1–2 use the cheap start model `res_start` and carry no gradient. Stage 2 runs
+    in two rounds of the same batch of short solves (one compiled solver): round 1 from
+    the screened candidates, round 2 from `orders(y)` of round 1's best y (thickness ± k
+    fringe orders at the same other parameters; the batch is padded with copies of that
+    best, which are converged already and cost a step). All results are ranked by the
+    final model `res_final`; the `1 + cfg.n_alternatives` best *distinct* ones
+    (`distinct(y1, y2)`: different minima) are solved to convergence with it (stage 3,
+    under the implicit adjoint); the best is the answer, the others are returned as
+    runner-ups (y (K, p), loss (K,), inf where there is none).
     """
     solver = _solver(cfg.solver, cfg.rtol, cfg.atol)
     a = jax.lax.stop_gradient(args)
+    m = 1 + cfg.n_alternatives
+
+    def final_loss(y):
+        return _loss(res_final, y, a)
+
     if y_starts.shape[0] > 1:
         cand, start_loss = _screen(res_start, y_starts, cfg.n_cols, cfg.n_solves, a,
                                    cfg.batching)
@@ -483,15 +553,107 @@ def _pipeline(res_start, res_final, y_starts, args, cfg):
             return optx.least_squares(res_start, solver, y0, a, throw=False,
                                       max_steps=cfg.start_steps).value
 
-        ys = _batch(short, cand, cfg.batching)
-        # ranked by the final model: a cheap start model's bias cannot pick the fringe order
-        losses = _batch(lambda y: _loss(res_final, y, a), ys, cfg.batching)
-        y0 = ys[jnp.argmin(jnp.where(jnp.isnan(losses), jnp.inf, losses))]
+        def round_(seeds, _):
+            ys = _batch(short, seeds, cfg.batching)
+            # ranked by the final model: a cheap start model's bias cannot pick the order
+            losses = _nan_inf(_batch(final_loss, ys, cfg.batching))
+            best = ys[jnp.argmin(losses)]
+            nxt = jnp.broadcast_to(best, seeds.shape)
+            if orders is not None:
+                yo = orders(best)
+                nxt = nxt.at[:yo.shape[0]].set(yo[:seeds.shape[0]])
+            return nxt, (ys, losses)
+
+        rounds = 2 if orders is not None else 1
+        _, (ys, losses) = jax.lax.scan(round_, cand, None, length=rounds)
+        ys, losses = ys.reshape(-1, ys.shape[-1]), losses.reshape(-1)
+        pick, valid = _best_distinct(ys, losses, m, distinct)
+        y_pol = jax.lax.stop_gradient(ys[pick])
     else:
-        y0, start_loss = y_starts[0], _loss(res_start, y_starts[0], a)[None]
-    sol = optx.least_squares(res_final, solver, jax.lax.stop_gradient(y0), args, throw=False,
-                             max_steps=cfg.max_steps)
-    return _strip(sol), start_loss
+        start_loss = _loss(res_start, y_starts[0], a)[None]
+        y_pol = jax.lax.stop_gradient(y_starts[:1])
+        valid = jnp.ones((1,), bool)
+
+    def solve(y0):
+        return _strip(optx.least_squares(res_final, solver, y0, args, throw=False,
+                                         max_steps=cfg.max_steps))
+
+    sols = _batch(solve, y_pol, cfg.batching)
+    lp = jnp.where(valid, _nan_inf(jax.vmap(final_loss)(jax.lax.stop_gradient(sols.value))),
+                   jnp.inf)
+    rank = jnp.argsort(lp)
+    sol = jax.tree_util.tree_map(lambda v: v[rank[0]], sols)
+    alt_y = jax.lax.stop_gradient(sols.value[rank[1:]])
+    alt_loss = lp[rank[1:]]
+    if distinct is not None and m > 1:
+        # two starts that converged into the same minimum as the answer are no runner-up
+        same = ~jax.vmap(distinct, (0, None))(alt_y, jax.lax.stop_gradient(sol.value))
+        alt_loss = jnp.where(same, jnp.inf, alt_loss)
+    k = cfg.n_alternatives  # fixed output size, whatever the path
+    pad = k - alt_y.shape[0]
+    if pad > 0:
+        alt_y = jnp.concatenate([alt_y, jnp.broadcast_to(sol.value, (pad,) + sol.value.shape)])
+        alt_loss = jnp.concatenate([alt_loss, jnp.full((pad,), jnp.inf, lp.dtype)])
+    return sol, start_loss, alt_y, alt_loss
+
+
+def _nan_inf(x):
+    return jnp.where(jnp.isnan(x), jnp.inf, x)
+
+
+def _best_distinct(ys, losses, m, distinct):
+    """Indices (m,) of the m lowest-loss rows of `ys` that are pairwise `distinct`, greedily
+    (lowest first), and whether each exists (fewer distinct minima than m: invalid)."""
+    order = jnp.argsort(losses)
+    ys, losses = ys[order], losses[order]
+    taken = jnp.zeros(losses.shape, bool).at[0].set(True)
+    pos, valid = [jnp.asarray(0)], [jnp.isfinite(losses[0])]
+    for _ in range(1, m):
+        ok = jnp.isfinite(losses) & ~taken
+        if distinct is not None:
+            for pj in pos:
+                ok = ok & jax.vmap(distinct, (0, None))(ys, ys[pj])
+        i = jnp.argmax(ok)  # the first (lowest-loss) admissible row
+        pos.append(i)
+        valid.append(ok[i])
+        taken = taken.at[i].set(True)
+    return order[jnp.stack(pos)], jnp.stack(valid)
+
+
+def _orders_fn(spec, x0, cos_outer, lam, n_orders):
+    """`orders(y)` for `_pipeline`: starting points ±1 … ±n_orders fringe orders from y.
+
+    One order of the film's interference is a change of the optical path D = 2 η₂ d cos θ₂
+    by one (mean) wavelength λ̄, i.e. Δd = λ̄ / (2 η₂ ⟨cos θ₂⟩) at the current η₂ (cos θ₂ by
+    Snell from the views' cos θ₁, averaged over them). Only the thickness moves; the short
+    solves then let every free parameter follow. None when thickness is not free.
+    """
+    if "thickness" not in spec.free or n_orders < 1:
+        return None, None
+    k = spec.free.index("thickness")
+    ks = np.concatenate([-np.arange(n_orders, 0, -1), np.arange(1, n_orders + 1)])
+
+    def step(y):
+        x = spec.with_free(spec.x_free(y), x0)
+        eta1, eta2 = x[4], x[1]
+        s1 = 1.0 - cos_outer * cos_outer
+        c2 = jnp.sqrt(jnp.clip(1.0 - (eta1 / eta2) ** 2 * s1, 1e-4, 1.0))
+        return lam / (2.0 * eta2 * jnp.mean(c2))
+
+    def orders(y):
+        xf = spec.x_free(y)
+        lo, hi = jnp.asarray(spec.lo[k], y.dtype), jnp.asarray(spec.hi[k], y.dtype)
+        d = xf[k] + jnp.asarray(ks, y.dtype) * step(y)
+        d = jnp.clip(d, lo + _START_MARGIN * (hi - lo), hi - _START_MARGIN * (hi - lo))
+        xs = jnp.broadcast_to(xf, (ks.size, xf.shape[0])).at[:, k].set(d)
+        return jax.vmap(spec.y_of)(xs)
+
+    def distinct(y1, y2):
+        """Different minima: thickness apart by more than a quarter order."""
+        d1, d2 = spec.x_free(y1)[k], spec.x_free(y2)[k]
+        return jnp.abs(d1 - d2) > 0.25 * jnp.minimum(step(y1), step(y2))
+
+    return orders, distinct
 
 
 def _covariance(res_x, x_free, args, n_obs, absolute_sigma):
@@ -514,7 +676,7 @@ def _covariance(res_x, x_free, args, n_obs, absolute_sigma):
     stderr = jnp.where(ok & (var >= 0), jnp.sqrt(jnp.abs(var)), jnp.inf)
     d = jnp.sqrt(jnp.abs(jnp.diag(ainv)))
     corr = ainv / (d[:, None] * d[None, :])
-    return stderr, corr
+    return stderr, corr, s2
 
 
 def _cells(lo, hi, n):
@@ -641,6 +803,12 @@ def _weights(sigma, shape, dtype):
                          f"observations {shape}") from None
 
 
+def _mean_wavelength(observer):
+    """λ̄ of an observer: the mean of its bands' centroids Σ_k λ_k W_kj (nm)."""
+    obs = get_observer(observer)
+    return float(np.mean(np.asarray(obs.wavelengths) @ np.asarray(obs.weights)))
+
+
 def _n_candidates(y_starts, n_cols, n_solves):
     """n_solves, by default 2 per screened row (≥ 8), at most the number of starts."""
     if n_solves is None:
@@ -669,6 +837,9 @@ class _FilmCfg(NamedTuple):
     max_steps: int
     absolute_sigma: bool
     batching: str
+    n_orders: int
+    n_alternatives: int
+    wavelength: float
 
 
 def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = ("thickness",),
@@ -745,15 +916,13 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
     cfg = _FilmCfg(static, method, refine_method, observer, o.terms, o.shat, quadrature,
                    start_quadrature, o.ndf, o.solver, o.rtol, o.atol, n_cols,
                    _n_candidates(y_starts, n_cols, o.n_solves), o.start_steps, o.max_steps,
-                   o.absolute_sigma, batching)
+                   o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
+                   _mean_wavelength(observer))
     box = tuple(jnp.asarray(b, dtype) for b in box)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
-        sol, x, loss, resid, stderr, corr, start_loss = _fit_film_jit(
-            observed.astype(dtype), w, theta_o.astype(dtype), x0, y_starts, box, lut, cfg)
-    film, alpha_fit = _split(x)
-    return FitResult(film, alpha_fit, loss, sol.result == optx.RESULTS.successful,
-                     sol.stats["num_steps"], dict(zip(free, stderr)), corr, free, resid,
-                     x_starts, start_loss, sol)
+        out = _fit_film_jit(observed.astype(dtype), w, theta_o.astype(dtype), x0, y_starts,
+                            box, lut, cfg)
+    return _result(out, free, x_starts, True)
 
 
 @functools.partial(jax.jit, static_argnames="cfg")
@@ -765,7 +934,7 @@ def _fit_film_jit(observed, w, theta_o, x0, y_starts, box, lut, cfg: _FilmCfg):
         film, alpha = _split(x)
         return patch_model(film, theta_o, alpha, method=method, observer=cfg.observer,
                            terms=cfg.terms, shat=cfg.shat, lut=lut, quadrature=quad,
-                           ndf=cfg.ndf, base="general")
+                           ndf=cfg.ndf, arithmetic="complex")
 
     def residuals(method, quad):
         def fn(y, args):
@@ -779,15 +948,11 @@ def _fit_film_jit(observed, w, theta_o, x0, y_starts, box, lut, cfg: _FilmCfg):
                 * ww).reshape(-1)
 
     args = (observed, w)
-    sol, start_loss = _pipeline(residuals(cfg.method, cfg.start_quadrature),
-                                residuals(final_method, cfg.quadrature), y_starts, args, cfg)
-    x_free = spec.x_free(sol.value)
-    x = jnp.stack(spec.with_free(x_free, x0))
-    r = res_x(x_free, args)
-    resid = r.reshape(observed.shape) / w
-    stderr, corr = _covariance(res_x, jax.lax.stop_gradient(x_free), jax.lax.stop_gradient(args),
-                               observed.size, cfg.absolute_sigma)
-    return sol, x, 0.5 * jnp.sum(r * r), resid, stderr, corr, start_loss
+    orders, distinct = _orders_fn(spec, x0, jnp.cos(theta_o), cfg.wavelength, cfg.n_orders)
+    out = _pipeline(residuals(cfg.method, cfg.start_quadrature),
+                    residuals(final_method, cfg.quadrature), y_starts, args, cfg, orders,
+                    distinct)
+    return _finish(out, res_x, spec, x0, args, w, cfg)
 
 
 # ----------------------------------------------------------------------------- fit_spectrum
@@ -802,6 +967,9 @@ class _SpecCfg(NamedTuple):
     max_steps: int
     absolute_sigma: bool
     batching: str
+    n_orders: int
+    n_alternatives: int
+    wavelength: float
 
 
 def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film,
@@ -869,16 +1037,13 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film,
     static, box = _static(spec)
     cfg = _SpecCfg(static, o.solver, o.rtol, o.atol, n_cols,
                    _n_candidates(y_starts, n_cols, o.n_solves), o.start_steps, o.max_steps,
-                   o.absolute_sigma, batching)
+                   o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
+                   float(np.mean(wavelength)) if V.is_concrete(wavelength) else 550.0)
     box = tuple(jnp.asarray(b, dtype) for b in box)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
-        sol, x, loss, resid, stderr, corr, start_loss = _fit_spectrum_jit(
-            observed.astype(dtype), w, wavelength.astype(dtype), cos_theta.astype(dtype), x0,
-            y_starts, box, cfg)
-    film, _ = _split(x)
-    return FitResult(film, None, loss, sol.result == optx.RESULTS.successful,
-                     sol.stats["num_steps"], dict(zip(free, stderr)), corr, free, resid,
-                     x_starts, start_loss, sol)
+        out = _fit_spectrum_jit(observed.astype(dtype), w, wavelength.astype(dtype),
+                                cos_theta.astype(dtype), x0, y_starts, box, cfg)
+    return _result(out, free, x_starts, False)
 
 
 @functools.partial(jax.jit, static_argnames="cfg")
@@ -896,10 +1061,36 @@ def _fit_spectrum_jit(observed, w, wavelength, cos_theta, x0, y_starts, box, cfg
         return ((spectrum_model(film, cos_theta, wavelength) - obs) * ww).reshape(-1)
 
     args = (observed, w)
-    sol, start_loss = _pipeline(res, res, y_starts, args, cfg)
+    orders, distinct = _orders_fn(spec, x0, cos_theta, cfg.wavelength, cfg.n_orders)
+    out = _pipeline(res, res, y_starts, args, cfg, orders, distinct)
+    return _finish(out, res_x, spec, x0, args, w, cfg)
+
+
+def _finish(out, res_x, spec, x0, args, w, cfg):
+    """Fitted parameters, loss, residuals, standard errors and runner-ups (inside jit)."""
+    sol, start_loss, alt_y, alt_loss = out
+    observed = args[0]
     x_free = spec.x_free(sol.value)
     x = jnp.stack(spec.with_free(x_free, x0))
     r = res_x(x_free, args)
-    stderr, corr = _covariance(res_x, jax.lax.stop_gradient(x_free), jax.lax.stop_gradient(args),
-                               observed.size, cfg.absolute_sigma)
-    return sol, x, 0.5 * jnp.sum(r * r), r.reshape(observed.shape) / w, stderr, corr, start_loss
+    loss = 0.5 * jnp.sum(r * r)
+    stderr, corr, s2 = _covariance(res_x, jax.lax.stop_gradient(x_free),
+                                   jax.lax.stop_gradient(args), observed.size,
+                                   cfg.absolute_sigma)
+    alt_x = jax.vmap(spec.x_free)(alt_y)
+    # Δχ² = Σr²/s² of the runner-up minus that of the answer (s² as for the errors)
+    gap = jax.lax.stop_gradient(alt_loss - loss)
+    dchi2 = jnp.where(jnp.isfinite(alt_loss), 2.0 * gap / jnp.where(s2 > 0, s2, 1.0), jnp.inf)
+    dchi2 = jnp.where((s2 > 0) | ~jnp.isfinite(alt_loss), dchi2,
+                      jnp.where(gap > 0, jnp.inf, 0.0))
+    return (sol, x, loss, r.reshape(observed.shape) / w, stderr, corr, start_loss, alt_x,
+            alt_loss, dchi2)
+
+
+def _result(out, free, x_starts, has_alpha):
+    sol, x, loss, resid, stderr, corr, start_loss, alt_x, alt_loss, dchi2 = out
+    film, alpha = _split(x)
+    return FitResult(film, alpha if has_alpha else None, loss,
+                     sol.result == optx.RESULTS.successful, sol.stats["num_steps"],
+                     dict(zip(free, stderr)), corr, free, resid, x_starts, start_loss, sol,
+                     alt_x, alt_loss, dchi2)

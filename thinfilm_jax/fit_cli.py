@@ -439,6 +439,12 @@ def run_fit_cli(args) -> int:
     print(f"{kind} fit of {path.name}: " + ", ".join(f"{k} = {p[k]:.6g} ± {err[k]:.2g}"
                                                     for k in p)
           + f"; loss {summary['loss']:.3g}, converged {summary['converged']}")
+    for ru in summary["runner_ups"]:
+        print("runner-up minimum: " + ", ".join(f"{k} = {v:.6g}" for k, v in ru["params"].items())
+              + f"; loss {ru['loss']:.3g} (Δχ² = {ru['dchi2']:.3g})")
+    if summary["ambiguous"]:
+        print("AMBIGUOUS: a runner-up minimum (another fringe order) fits almost as well "
+              "(Δχ² < 9); the data cannot tell them apart")
     if summary["degenerate"]:
         print("strongly correlated (|corr| > 0.95): "
               + ", ".join(f"{a}/{b}" for a, b in summary["degenerate"]))

@@ -1,0 +1,295 @@
+r"""Thickness maps: per-pixel fits of film thickness (optionally η₂) to an image (issue #13 §3).
+
+An image of a film under known light is, pixel by pixel, one `fit_film` problem with a
+single view: the band radiances L_j (J = 3 numbers) of pixel p at its known view angle
+θ_o,p. Three numbers cannot pin the fringe order of a thick film on their own, so the map
+is fitted in three batched stages, each a pure function of a leading pixel axis (so it
+can be `jax.vmap`ped, chunked and sharded across devices, `thinfilm_jax.sharding`):
+
+1. *grid*: the loss $E_p(d_g) = \tfrac12\sum_j ((L_j(d_g) - o_{pj})/\sigma)^2$ at `grid`
+   thicknesses spanning the box (with η₂ free: the minimum over `eta_grid` film indices);
+2. *smoothness prior* (optional, `smoothness_nm` = τ): iterated conditional modes on the
+   grid, each pixel in turn (checkerboard order) taking
+   $\arg\min_g E_p(d_g) + \tfrac12\sum_{q \in N_4(p)} ((d_g - d_q)/τ)^2$: neighbours
+   vote for the fringe order (a warm start from the neighbours);
+3. *refine*: damped Gauss–Newton (Levenberg–Marquardt, fixed `steps`) per pixel from the
+   grid value, with the prior's residuals (d − d_q)/τ to the neighbours' current values
+   (Jacobi sweeps), the thickness clipped to its box.
+
+Standard errors are the linearised ones of the pixel's own data,
+σ √((JᵀJ)⁻¹)_dd, with σ the given noise level (`sigma`, absolute).
+
+Example:
+    >>> import jax.numpy as jnp
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.fit_map import fit_patch_map, render_patch_map
+    >>> d = jnp.linspace(300.0, 420.0, 6).reshape(2, 3)
+    >>> theta = jnp.full((2, 3), 0.3)
+    >>> img = render_patch_map(Film(d, 1.33, 1.0), theta, 0.2)
+    >>> res = fit_patch_map(img, theta, alpha=0.2, initial=Film(350.0, 1.33, 1.0),
+    ...                     sigma=1e-3, smoothness_nm=50.0)
+    >>> bool(jnp.max(jnp.abs(res.thickness - d)) < 0.5)
+    True
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from . import _validate as V
+from .film import Film
+from .options import ModelOptions
+from .patch import METHODS, patch_one
+from .spectra import DEFAULT_OBSERVER, get_observer
+
+__all__ = ["MapResult", "fit_patch_map", "render_patch_map"]
+
+#: The map model's defaults: the real-time `filtered` path, small quadrature (its moments).
+MAP_OPTIONS = ModelOptions(quadrature=(8, 8), arithmetic="complex")
+
+
+class MapResult(NamedTuple):
+    """A fitted map (H, W) per field, plus the run's statistics."""
+
+    thickness: Array
+    eta_film: Array
+    loss: Array
+    stderr: Array
+    seconds: float
+    pixels_per_second: float
+
+
+def _pixel_model(method, observer, options, alpha):
+    def model(x, eta_base, kappa_base, theta):
+        film = Film(x[0], x[1], eta_base, kappa_base)
+        return patch_one(film, theta, alpha, method=method, observer=observer,
+                         options=options)
+    return model
+
+
+def render_patch_map(film: Film, theta_o, alpha, *, method: str = "filtered",
+                     observer: str = DEFAULT_OBSERVER,
+                     options: ModelOptions = MAP_OPTIONS) -> Array:
+    """Band radiances (H, W, J) of a film whose fields (H, W) vary per pixel, seen at the
+    per-pixel view angles θ_o (H, W) under uniform light (SPEC §7): the map model."""
+    theta_o = jnp.asarray(theta_o)
+    f = Film(*(jnp.broadcast_to(jnp.asarray(v, theta_o.dtype if jnp.issubdtype(
+        theta_o.dtype, jnp.floating) else float), theta_o.shape) for v in film))
+    model = _pixel_model(method, observer, options, alpha)
+
+    def one(d, e, e3, k3, t):
+        return model(jnp.stack([d, e]), e3, k3, t)
+
+    flat = [v.reshape(-1) for v in (f.thickness, f.eta_film, f.eta_base, f.kappa_base,
+                                    theta_o)]
+    out = jax.vmap(one)(*flat)
+    return out.reshape(*theta_o.shape, -1)
+
+
+@functools.partial(jax.jit, static_argnames=("model",))
+def _grid_losses(obs, theta, e3, k3, grid, sigma, model):
+    """(P, G) losses of every pixel at every grid point (G, 2)."""
+
+    def pixel(o, t):
+        pred = jax.vmap(lambda x: model(x, e3, k3, t))(grid)
+        r = (pred - o) / sigma
+        return 0.5 * jnp.sum(r * r, axis=-1)
+
+    return jax.vmap(pixel)(obs, theta)
+
+
+@functools.partial(jax.jit, static_argnames=("model", "steps", "free_eta"))
+def _refine(obs, theta, x0, nb, nb_ok, e3, k3, sigma, tau, lo, hi, model, steps, free_eta):
+    """Per pixel: `steps` damped Gauss–Newton steps on [(L(x) − o)/σ, (d − d_q)/τ]."""
+
+    def pixel(o, t, x, q, ok):
+        def res(xf):
+            xx = xf if free_eta else jnp.stack([xf[0], x[1]])
+            r = (model(xx, e3, k3, t) - o) / sigma
+            prior = jnp.where(ok, (xx[0] - q) / tau, 0.0)
+            return jnp.concatenate([r, prior])
+
+        xf0 = x if free_eta else x[:1]
+
+        def step(_, carry):
+            xf, lam = carry
+            r = res(xf)
+            jac = jax.jacfwd(res)(xf)
+            jtj = jnp.matmul(jac.T, jac, precision=jax.lax.Precision.HIGHEST)
+            g = jnp.matmul(jac.T, r, precision=jax.lax.Precision.HIGHEST)
+            a = jtj + lam * jnp.diag(jnp.diag(jtj) + 1e-12)
+            dx = -jnp.linalg.solve(a, g)
+            xn = jnp.clip(xf + dx, lo[:xf.shape[0]], hi[:xf.shape[0]])
+            better = jnp.sum(res(xn) ** 2) < jnp.sum(r * r)
+            return (jnp.where(better, xn, xf), jnp.where(better, lam * 0.3, lam * 10.0))
+
+        xf, _ = jax.lax.fori_loop(0, steps, step, (xf0, jnp.asarray(1e-3, x.dtype)))
+        xx = xf if free_eta else jnp.stack([xf[0], x[1]])
+        r = res(xf)[: o.shape[0]]
+        jd = jax.jacfwd(lambda v: res(v)[: o.shape[0]])(xf)
+        jtj = jnp.matmul(jd.T, jd, precision=jax.lax.Precision.HIGHEST)
+        cov = jnp.linalg.pinv(jtj)
+        se = jnp.sqrt(jnp.abs(cov[0, 0]))
+        return xx, 0.5 * jnp.sum(r * r), se
+
+    return jax.vmap(pixel)(obs, theta, x0, nb, nb_ok)
+
+
+def _neighbours(d):
+    """(H, W, 4) values of the 4-neighbours of each pixel and (H, W, 4) validity."""
+    h, w = d.shape
+    pad = np.pad(d, 1, mode="edge")
+    nb = np.stack([pad[:-2, 1:-1], pad[2:, 1:-1], pad[1:-1, :-2], pad[1:-1, 2:]], axis=-1)
+    ok = np.ones((h, w, 4), bool)
+    ok[0, :, 0] = ok[-1, :, 1] = ok[:, 0, 2] = ok[:, -1, 3] = False
+    return nb, ok
+
+
+def _icm(energy, values, tau, sweeps):
+    """Iterated conditional modes on a (H, W, G) energy over grid `values` (G,) with the
+    pairwise prior ½((v_g − v_q)/τ)² between 4-neighbours (checkerboard updates)."""
+    idx = np.argmin(energy, axis=-1)
+    h, w = idx.shape
+    colour = (np.add.outer(np.arange(h), np.arange(w)) % 2).astype(bool)
+    for _ in range(sweeps):
+        for c in (False, True):
+            nb, ok = _neighbours(values[idx])
+            pair = 0.5 * np.sum(np.where(ok[..., None], ((values[None, None, None, :]
+                                                         - nb[..., None]) / tau) ** 2, 0.0),
+                                axis=2)
+            new = np.argmin(energy + pair, axis=-1)
+            idx = np.where(colour == c, new, idx)
+    return idx
+
+
+def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
+                  method: str = "filtered", sigma: float = 0.01, smoothness_nm=None,
+                  bounds=None, grid: int = 201, eta_grid: int = 7, steps: int = 8,
+                  sweeps: int = 3, chunk: int = 2048, observer: str = DEFAULT_OBSERVER,
+                  options: ModelOptions = MAP_OPTIONS, devices=None,
+                  progress: bool = False) -> MapResult:
+    """Fit a thickness map (optionally η₂) to an image of band radiances (module docstring).
+
+    Args:
+        image: (H, W, J) band radiances (as `render_patch_map` / `patch_radiance` give).
+        theta_o: (H, W) view angle of each pixel (radians), or a scalar.
+        alpha: GGX roughness (known).
+        initial: `Film` with scalar fields: η₂ (initial / fixed), η₃, κ₃, η₁ (known).
+        free: ("thickness",) or ("thickness", "eta_film").
+        method: a `patch.METHODS` name for the map model ("filtered": real-time, default).
+        sigma: noise standard deviation of the image (absolute; weights and errors).
+        smoothness_nm: τ of the neighbour prior (None: independent pixels).
+        bounds: {"thickness": (lo, hi), "eta_film": (lo, hi)} (default (0, 2000) nm and
+            (1.2, 1.8) when η₂ is free).
+        grid, eta_grid: grid sizes of stage 1; steps: Gauss–Newton steps per sweep;
+        sweeps: ICM / Jacobi sweeps of the prior.
+        chunk: pixels per batch (memory; progress granularity).
+        observer, options: the map model's observer and `ModelOptions`.
+        devices: None (one device), or as `thinfilm_jax.sharding.map_sharded` takes it
+            (an int k, devices, or a `Mesh`): each stage's chunks are split across them.
+        progress: show a tqdm progress bar over the chunks.
+
+    Returns:
+        `MapResult` with (H, W) maps and the run's pixels per second.
+    """
+    V.check_choice("method", method, METHODS)
+    free = (free,) if isinstance(free, str) else tuple(free)
+    if free not in (("thickness",), ("thickness", "eta_film")):
+        raise ValueError(f"free must be ('thickness',) or ('thickness', 'eta_film'), got {free}")
+    image = np.asarray(image, float)
+    n_bands = get_observer(observer).n_bands
+    if image.ndim != 3 or image.shape[-1] != n_bands:
+        raise ValueError(f"image must have shape (H, W, {n_bands}), got {image.shape}")
+    if not np.all(np.isfinite(image)):
+        raise ValueError("image must be finite")
+    h, w, _ = image.shape
+    theta = np.broadcast_to(np.asarray(theta_o, float), (h, w))
+    V.check_angle("theta_o", theta)
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma must be > 0, got {sigma!r}")
+    if smoothness_nm is not None and not smoothness_nm > 0:
+        raise ValueError(f"smoothness_nm must be > 0 or None, got {smoothness_nm!r}")
+    free_eta = "eta_film" in free
+    b = {"thickness": (0.0, 2000.0), "eta_film": (1.2, 1.8)} | dict(bounds or {})
+    lo = jnp.asarray([b["thickness"][0], b["eta_film"][0] if free_eta else 0.0])
+    hi = jnp.asarray([b["thickness"][1], b["eta_film"][1] if free_eta else 10.0])
+    d_grid = np.linspace(*b["thickness"], grid)
+    e_grid = (np.linspace(*b["eta_film"], eta_grid) if free_eta
+              else np.asarray([float(initial.eta_film)]))
+    grid_x = jnp.asarray(np.stack(np.meshgrid(d_grid, e_grid, indexing="ij"), -1).reshape(-1, 2))
+    model = _pixel_model(method, observer, options, float(alpha))
+    e3, k3 = float(initial.eta_base), float(initial.kappa_base)
+    obs = image.reshape(-1, n_bands)
+    th = theta.reshape(-1)
+    n = obs.shape[0]
+
+    grid_fn = functools.partial(_grid_losses, model=model)
+    refine_fn = functools.partial(_refine, model=model, steps=steps, free_eta=free_eta)
+    if devices is not None:
+        from .sharding import map_sharded  # lazily: only a sharded run needs it
+
+        grid_fn = map_sharded(grid_fn, in_axes=(0, 0, None, None, None, None),
+                              devices=devices)
+        refine_fn = map_sharded(refine_fn, in_axes=(0, 0, 0, 0, 0) + (None,) * 6,
+                                devices=devices)
+    chunks = [slice(i, min(i + chunk, n)) for i in range(0, n, chunk)]
+    passes = 1 + (sweeps if smoothness_nm is not None else 1)
+    bar = _progress(progress, len(chunks) * passes)
+    t0 = time.perf_counter()
+    with jax.default_matmul_precision("highest"):
+        energy = []
+        for s in chunks:
+            energy.append(np.asarray(grid_fn(jnp.asarray(obs[s]), jnp.asarray(th[s]), e3, k3,
+                                             grid_x, sigma)))
+            bar.update(1)
+        energy = np.concatenate(energy).reshape(h, w, grid, e_grid.size)
+        best_e = np.argmin(energy, axis=-1)  # η₂ index per (pixel, d)
+        e_d = np.min(energy, axis=-1)
+        tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
+        idx = _icm(e_d, d_grid, tau, sweeps) if smoothness_nm is not None \
+            else np.argmin(e_d, axis=-1)
+        x = np.stack([d_grid[idx], e_grid[np.take_along_axis(best_e, idx[..., None],
+                                                              -1)[..., 0]]], -1)
+        for _ in range(passes - 1):
+            nb, ok = _neighbours(x[..., 0])
+            if smoothness_nm is None:
+                ok = np.zeros_like(ok)
+            out = []
+            xf = x.reshape(-1, 2)
+            nbf, okf = nb.reshape(-1, 4), ok.reshape(-1, 4)
+            for s in chunks:
+                out.append(jax.tree_util.tree_map(np.asarray, refine_fn(
+                    jnp.asarray(obs[s]), jnp.asarray(th[s]), jnp.asarray(xf[s]),
+                    jnp.asarray(nbf[s]), jnp.asarray(okf[s]), e3, k3, sigma,
+                    min(tau, 1e30), lo, hi)))
+                bar.update(1)
+            x = np.concatenate([o[0] for o in out]).reshape(h, w, 2)
+            loss = np.concatenate([o[1] for o in out]).reshape(h, w)
+            se = np.concatenate([o[2] for o in out]).reshape(h, w)
+    dt = time.perf_counter() - t0
+    bar.close()
+    return MapResult(jnp.asarray(x[..., 0]), jnp.asarray(x[..., 1]), jnp.asarray(loss),
+                     jnp.asarray(se), dt, n / dt)
+
+
+class _NoBar:
+    def update(self, k):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress(on, total):
+    if not on:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="chunk", desc="fit-map")

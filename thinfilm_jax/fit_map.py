@@ -47,7 +47,7 @@ from . import _validate as V
 from .film import Film
 from .options import ModelOptions
 from .patch import METHODS, patch_one
-from .spectra import DEFAULT_OBSERVER, get_observer
+from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 
 __all__ = ["MapResult", "fit_patch_map", "render_patch_map"]
 
@@ -66,9 +66,12 @@ class MapResult(NamedTuple):
     pixels_per_second: float
 
 
+@functools.lru_cache(maxsize=32)
 def _pixel_model(method, observer, options, alpha):
-    def model(x, eta_base, kappa_base, theta):
-        film = Film(x[0], x[1], eta_base, kappa_base)
+    """model(x = (d, η₂), θ_o, ctx = (η₃, κ₃, η₁)) → (J,) of one pixel (cached: one jit
+    compilation per model, not per call)."""
+    def model(x, theta, ctx):
+        film = Film(x[0], x[1], ctx[0], ctx[1], ctx[2])
         return patch_one(film, theta, alpha, method=method, observer=observer,
                          options=options)
     return model
@@ -80,39 +83,41 @@ def render_patch_map(film: Film, theta_o, alpha, *, method: str = "filtered",
     """Band radiances (H, W, J) of a film whose fields (H, W) vary per pixel, seen at the
     per-pixel view angles θ_o (H, W) under uniform light (SPEC §7): the map model."""
     theta_o = jnp.asarray(theta_o)
-    f = Film(*(jnp.broadcast_to(jnp.asarray(v, theta_o.dtype if jnp.issubdtype(
-        theta_o.dtype, jnp.floating) else float), theta_o.shape) for v in film))
-    model = _pixel_model(method, observer, options, alpha)
-
-    def one(d, e, e3, k3, t):
-        return model(jnp.stack([d, e]), e3, k3, t)
-
-    flat = [v.reshape(-1) for v in (f.thickness, f.eta_film, f.eta_base, f.kappa_base,
-                                    theta_o)]
-    out = jax.vmap(one)(*flat)
+    dt = theta_o.dtype if jnp.issubdtype(theta_o.dtype, jnp.floating) else float
+    f = Film(*(jnp.broadcast_to(jnp.asarray(v, dt), theta_o.shape) for v in film))
+    model = _pixel_model(method, observer, options, float(alpha))
+    out = _render_flat(tuple(v.reshape(-1) for v in (*f, theta_o)), model)
     return out.reshape(*theta_o.shape, -1)
 
 
 @functools.partial(jax.jit, static_argnames=("model",))
-def _grid_losses(obs, theta, e3, k3, grid, sigma, model):
-    """(P, G) losses of every pixel at every grid point (G, 2)."""
+def _render_flat(flat, model):
+    def one(d, e, e3, k3, e1, t):
+        return model(jnp.stack([d, e]), t, (e3, k3, e1))
 
-    def pixel(o, t):
-        pred = jax.vmap(lambda x: model(x, e3, k3, t))(grid)
+    return jax.vmap(one)(*flat)
+
+
+@functools.partial(jax.jit, static_argnames=("model",))
+def _grid_losses(obs, pix, ctx, grid, sigma, model):
+    """(P, G) losses of every pixel (its per-pixel inputs `pix`) at every grid point (G, 2)."""
+
+    def pixel(o, p):
+        pred = jax.vmap(lambda x: model(x, p, ctx))(grid)
         r = (pred - o) / sigma
         return 0.5 * jnp.sum(r * r, axis=-1)
 
-    return jax.vmap(pixel)(obs, theta)
+    return jax.vmap(pixel)(obs, pix)
 
 
 @functools.partial(jax.jit, static_argnames=("model", "steps", "free_eta"))
-def _refine(obs, theta, x0, nb, nb_ok, e3, k3, sigma, tau, lo, hi, model, steps, free_eta):
+def _refine(obs, pix, x0, nb, nb_ok, ctx, sigma, tau, lo, hi, model, steps, free_eta):
     """Per pixel: `steps` damped Gauss–Newton steps on [(L(x) − o)/σ, (d − d_q)/τ]."""
 
-    def pixel(o, t, x, q, ok):
+    def pixel(o, p, x, q, ok):
         def res(xf):
             xx = xf if free_eta else jnp.stack([xf[0], x[1]])
-            r = (model(xx, e3, k3, t) - o) / sigma
+            r = (model(xx, p, ctx) - o) / sigma
             prior = jnp.where(ok, (xx[0] - q) / tau, 0.0)
             return jnp.concatenate([r, prior])
 
@@ -139,7 +144,7 @@ def _refine(obs, theta, x0, nb, nb_ok, e3, k3, sigma, tau, lo, hi, model, steps,
         se = jnp.sqrt(jnp.abs(cov[0, 0]))
         return xx, 0.5 * jnp.sum(r * r), se
 
-    return jax.vmap(pixel)(obs, theta, x0, nb, nb_ok)
+    return jax.vmap(pixel)(obs, pix, x0, nb, nb_ok)
 
 
 def _neighbours(d):
@@ -169,6 +174,134 @@ def _icm(energy, values, tau, sweeps):
     return idx
 
 
+def _check_image(image, observer, sigma):
+    """(H, W, J) finite radiances as float64 NumPy, else a ValueError naming `image`.
+
+    Band radiances are Σ_k W_kj L(λ_k) with the observer's weights W (columns summing to 1):
+    bands whose weights have negative lobes (Stiles–Burch RGB) may be negative, down to
+    Σ_k min(W_kj, 0) × the image's largest value; noise adds 5σ. Anything lower is not a
+    radiance of this observer (a wrong observer, an sRGB image, an offset) and is rejected.
+    """
+    obs = get_observer(observer)
+    n_bands = obs.n_bands
+    a = np.asarray(image)
+    if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)) \
+            or a.dtype == bool:
+        raise ValueError(f"image must be a real array of band radiances, got dtype {a.dtype}")
+    a = a.astype(np.float64)
+    if a.ndim != 3 or a.shape[-1] != n_bands or a.shape[0] < 1 or a.shape[1] < 1:
+        raise ValueError(f"image must have shape (H, W, {n_bands}), got {a.shape}")
+    bad = ~np.isfinite(a)
+    if np.any(bad):
+        p = np.argwhere(bad)[0]
+        raise ValueError(f"image must be finite: {int(bad.any(-1).sum())} pixel(s) hold "
+                         f"NaN/inf, first at (row {p[0]}, col {p[1]})")
+    floor = np.minimum(obs.weights, 0.0).sum(axis=0) * max(float(a.max()), 0.0) - 5 * sigma
+    low = a < floor
+    if np.any(low):
+        p = np.argwhere(low)[0]
+        raise ValueError(f"image must hold non-negative radiances ({observer} bands reach "
+                         f"at most {floor[p[2]]:.3g} below zero with noise σ={sigma:g}): "
+                         f"{a[tuple(p)]:.4g} at (row {p[0]}, col {p[1]}, band {p[2]})")
+    return a
+
+
+def _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps, sweeps, chunk):
+    free = (free,) if isinstance(free, str) else tuple(free)
+    unknown = [f for f in free if f not in ("thickness", "eta_film")]
+    if unknown or "thickness" not in free or len(set(free)) != len(free):
+        raise ValueError(f"free must be ('thickness',) or ('thickness', 'eta_film'), got "
+                         f"{free}" + (f" (unknown: {unknown})" if unknown else ""))
+    if not (isinstance(sigma, (int, float)) and np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma must be a finite number > 0, got {sigma!r}")
+    if smoothness_nm is not None and not (np.isfinite(smoothness_nm) and smoothness_nm > 0):
+        raise ValueError(f"smoothness_nm must be > 0 or None, got {smoothness_nm!r}")
+    for name, v, lo in (("grid", grid, 2), ("eta_grid", eta_grid, 1), ("steps", steps, 0),
+                        ("sweeps", sweeps, 0), ("chunk", chunk, 1)):
+        V.check_int(name, v, lo)
+    b = {"thickness": (0.0, 2000.0), "eta_film": (1.2, 1.8)}
+    for k, v in dict(bounds or {}).items():
+        if k not in b:
+            raise ValueError(f"bounds: unknown parameter {k!r}; expected thickness, eta_film")
+        v = tuple(float(t) for t in v)
+        if len(v) != 2 or not (np.all(np.isfinite(v)) and v[0] < v[1]):
+            raise ValueError(f"bounds[{k!r}] must be (lo, hi) with lo < hi, got {v}")
+        if k == "thickness" and v[0] < 0:
+            raise ValueError(f"bounds['thickness'] must be >= 0 nm, got {v}")
+        b[k] = v
+    return free, b
+
+
+def _fit_map(obs, pix, ctx, model, shape, *, eta0, free, sigma, smoothness_nm, bounds,
+             grid, eta_grid, steps, sweeps, chunk, devices, progress) -> MapResult:
+    """The shared engine: `obs` (P, J), per-pixel model inputs `pix` (a pytree of (P, ...)
+    leaves), shared inputs `ctx`, ``model(x, pix_p, ctx) → (J,)``; (H, W) = `shape`."""
+    h, w = shape
+    free_eta = "eta_film" in free
+    b = bounds
+    lo = jnp.asarray([b["thickness"][0], b["eta_film"][0] if free_eta else 0.0])
+    hi = jnp.asarray([b["thickness"][1], b["eta_film"][1] if free_eta else 10.0])
+    d_grid = np.linspace(*b["thickness"], grid)
+    e_grid = np.linspace(*b["eta_film"], eta_grid) if free_eta else np.asarray([eta0])
+    grid_x = jnp.asarray(np.stack(np.meshgrid(d_grid, e_grid, indexing="ij"), -1).reshape(-1, 2))
+    n = obs.shape[0]
+
+    grid_fn = functools.partial(_grid_losses, model=model)
+    refine_fn = functools.partial(_refine, model=model, steps=steps, free_eta=free_eta)
+    if devices is not None:
+        from .sharding import map_sharded  # lazily: only a sharded run needs it
+
+        grid_fn = map_sharded(grid_fn, in_axes=(0, 0, None, None, None), devices=devices)
+        refine_fn = map_sharded(refine_fn, in_axes=(0, 0, 0, 0, 0) + (None,) * 5,
+                                devices=devices)
+    chunks = [slice(i, min(i + chunk, n)) for i in range(0, n, chunk)]
+    passes = 1 + (sweeps if smoothness_nm is not None else 1)
+    bar = _progress(progress, len(chunks) * passes)
+
+    def take(s):
+        return jax.tree_util.tree_map(lambda a: jnp.asarray(a[s]), pix)
+
+    t0 = time.perf_counter()
+    try:
+        with jax.default_matmul_precision("highest"):
+            energy = []
+            for s in chunks:
+                energy.append(np.asarray(grid_fn(jnp.asarray(obs[s]), take(s), ctx, grid_x,
+                                                 sigma)))
+                bar.update(1)
+            energy = np.concatenate(energy).reshape(h, w, grid, e_grid.size)
+            best_e = np.argmin(energy, axis=-1)  # η₂ index per (pixel, d)
+            e_d = np.min(energy, axis=-1)
+            tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
+            idx = _icm(e_d, d_grid, tau, sweeps) if smoothness_nm is not None \
+                else np.argmin(e_d, axis=-1)
+            x = np.stack([d_grid[idx], e_grid[np.take_along_axis(best_e, idx[..., None],
+                                                                  -1)[..., 0]]], -1)
+            loss = np.take_along_axis(e_d, idx[..., None], -1)[..., 0]
+            se = np.full((h, w), np.nan)
+            for _ in range(passes - 1):
+                nb, ok = _neighbours(x[..., 0])
+                if smoothness_nm is None:
+                    ok = np.zeros_like(ok)
+                out = []
+                xf = x.reshape(-1, 2)
+                nbf, okf = nb.reshape(-1, 4), ok.reshape(-1, 4)
+                for s in chunks:
+                    out.append(jax.tree_util.tree_map(np.asarray, refine_fn(
+                        jnp.asarray(obs[s]), take(s), jnp.asarray(xf[s]),
+                        jnp.asarray(nbf[s]), jnp.asarray(okf[s]), ctx, sigma,
+                        min(tau, 1e30), lo, hi)))
+                    bar.update(1)
+                x = np.concatenate([o[0] for o in out]).reshape(h, w, 2)
+                loss = np.concatenate([o[1] for o in out]).reshape(h, w)
+                se = np.concatenate([o[2] for o in out]).reshape(h, w)
+    finally:
+        bar.close()
+    dt = time.perf_counter() - t0
+    return MapResult(jnp.asarray(x[..., 0]), jnp.asarray(x[..., 1]), jnp.asarray(loss),
+                     jnp.asarray(se), dt, n / dt)
+
+
 def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
                   method: str = "filtered", sigma: float = 0.01, smoothness_nm=None,
                   bounds=None, grid: int = 201, eta_grid: int = 7, steps: int = 8,
@@ -178,9 +311,11 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
     """Fit a thickness map (optionally η₂) to an image of band radiances (module docstring).
 
     Args:
-        image: (H, W, J) band radiances (as `render_patch_map` / `patch_radiance` give).
-        theta_o: (H, W) view angle of each pixel (radians), or a scalar.
-        alpha: GGX roughness (known).
+        image: (H, W, J) band radiances (as `render_patch_map` / `patch_radiance` give):
+            finite, non-negative up to the observer's negative lobes and noise
+            (`_check_image`); any real dtype (read as float64).
+        theta_o: (H, W) view angle of each pixel (radians, [0, π/2]), or a scalar.
+        alpha: GGX roughness α ∈ (0, 1] (known).
         initial: `Film` with scalar fields: η₂ (initial / fixed), η₃, κ₃, η₁ (known).
         free: ("thickness",) or ("thickness", "eta_film").
         method: a `patch.METHODS` name for the map model ("filtered": real-time, default).
@@ -197,86 +332,40 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
         progress: show a tqdm progress bar over the chunks.
 
     Returns:
-        `MapResult` with (H, W) maps and the run's pixels per second.
+        `MapResult` with (H, W) maps and the run's pixels per second (the wall time
+        includes compilation on a first call).
+
+    Raises:
+        ValueError naming the argument: an image not (H, W, J), NaN/inf or negative
+        radiances, a theta_o that is not a scalar or (H, W), α ∉ (0, 1], unknown `free` names.
     """
     V.check_choice("method", method, METHODS)
-    free = (free,) if isinstance(free, str) else tuple(free)
-    if free not in (("thickness",), ("thickness", "eta_film")):
-        raise ValueError(f"free must be ('thickness',) or ('thickness', 'eta_film'), got {free}")
-    image = np.asarray(image, float)
-    n_bands = get_observer(observer).n_bands
-    if image.ndim != 3 or image.shape[-1] != n_bands:
-        raise ValueError(f"image must have shape (H, W, {n_bands}), got {image.shape}")
-    if not np.all(np.isfinite(image)):
-        raise ValueError("image must be finite")
-    h, w, _ = image.shape
-    theta = np.broadcast_to(np.asarray(theta_o, float), (h, w))
+    V.check_choice("observer", observer, OBSERVERS)
+    free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
+                             sweeps, chunk)
+    image = _check_image(image, observer, float(sigma))
+    h, w, n_bands = image.shape
+    theta_in = np.asarray(theta_o, float)
+    if theta_in.shape not in ((), (h, w)):
+        raise ValueError(f"theta_o must be a scalar or have the image's shape ({h}, {w}), "
+                         f"got {theta_in.shape}")
+    theta = np.broadcast_to(theta_in, (h, w))
+    V.check_finite("theta_o", theta)
     V.check_angle("theta_o", theta)
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma must be > 0, got {sigma!r}")
-    if smoothness_nm is not None and not smoothness_nm > 0:
-        raise ValueError(f"smoothness_nm must be > 0 or None, got {smoothness_nm!r}")
-    free_eta = "eta_film" in free
-    b = {"thickness": (0.0, 2000.0), "eta_film": (1.2, 1.8)} | dict(bounds or {})
-    lo = jnp.asarray([b["thickness"][0], b["eta_film"][0] if free_eta else 0.0])
-    hi = jnp.asarray([b["thickness"][1], b["eta_film"][1] if free_eta else 10.0])
-    d_grid = np.linspace(*b["thickness"], grid)
-    e_grid = (np.linspace(*b["eta_film"], eta_grid) if free_eta
-              else np.asarray([float(initial.eta_film)]))
-    grid_x = jnp.asarray(np.stack(np.meshgrid(d_grid, e_grid, indexing="ij"), -1).reshape(-1, 2))
+    if np.ndim(alpha) != 0:
+        raise ValueError(f"alpha must be a scalar, got shape {np.shape(alpha)}")
+    V.check_range("alpha", float(alpha), 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    initial = V.check_film(initial, "initial")
+    if np.shape(initial.thickness) != () or any(np.ndim(v) for v in initial):
+        raise ValueError("initial must be a Film with scalar fields")
     model = _pixel_model(method, observer, options, float(alpha))
-    e3, k3 = float(initial.eta_base), float(initial.kappa_base)
-    obs = image.reshape(-1, n_bands)
-    th = theta.reshape(-1)
-    n = obs.shape[0]
-
-    grid_fn = functools.partial(_grid_losses, model=model)
-    refine_fn = functools.partial(_refine, model=model, steps=steps, free_eta=free_eta)
-    if devices is not None:
-        from .sharding import map_sharded  # lazily: only a sharded run needs it
-
-        grid_fn = map_sharded(grid_fn, in_axes=(0, 0, None, None, None, None),
-                              devices=devices)
-        refine_fn = map_sharded(refine_fn, in_axes=(0, 0, 0, 0, 0) + (None,) * 6,
-                                devices=devices)
-    chunks = [slice(i, min(i + chunk, n)) for i in range(0, n, chunk)]
-    passes = 1 + (sweeps if smoothness_nm is not None else 1)
-    bar = _progress(progress, len(chunks) * passes)
-    t0 = time.perf_counter()
-    with jax.default_matmul_precision("highest"):
-        energy = []
-        for s in chunks:
-            energy.append(np.asarray(grid_fn(jnp.asarray(obs[s]), jnp.asarray(th[s]), e3, k3,
-                                             grid_x, sigma)))
-            bar.update(1)
-        energy = np.concatenate(energy).reshape(h, w, grid, e_grid.size)
-        best_e = np.argmin(energy, axis=-1)  # η₂ index per (pixel, d)
-        e_d = np.min(energy, axis=-1)
-        tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
-        idx = _icm(e_d, d_grid, tau, sweeps) if smoothness_nm is not None \
-            else np.argmin(e_d, axis=-1)
-        x = np.stack([d_grid[idx], e_grid[np.take_along_axis(best_e, idx[..., None],
-                                                              -1)[..., 0]]], -1)
-        for _ in range(passes - 1):
-            nb, ok = _neighbours(x[..., 0])
-            if smoothness_nm is None:
-                ok = np.zeros_like(ok)
-            out = []
-            xf = x.reshape(-1, 2)
-            nbf, okf = nb.reshape(-1, 4), ok.reshape(-1, 4)
-            for s in chunks:
-                out.append(jax.tree_util.tree_map(np.asarray, refine_fn(
-                    jnp.asarray(obs[s]), jnp.asarray(th[s]), jnp.asarray(xf[s]),
-                    jnp.asarray(nbf[s]), jnp.asarray(okf[s]), e3, k3, sigma,
-                    min(tau, 1e30), lo, hi)))
-                bar.update(1)
-            x = np.concatenate([o[0] for o in out]).reshape(h, w, 2)
-            loss = np.concatenate([o[1] for o in out]).reshape(h, w)
-            se = np.concatenate([o[2] for o in out]).reshape(h, w)
-    dt = time.perf_counter() - t0
-    bar.close()
-    return MapResult(jnp.asarray(x[..., 0]), jnp.asarray(x[..., 1]), jnp.asarray(loss),
-                     jnp.asarray(se), dt, n / dt)
+    ctx = tuple(jnp.asarray(float(v)) for v in (initial.eta_base, initial.kappa_base,
+                                                initial.eta_outer))
+    return _fit_map(image.reshape(-1, n_bands), theta.reshape(-1), ctx, model, (h, w),
+                    eta0=float(initial.eta_film), free=free, sigma=float(sigma),
+                    smoothness_nm=smoothness_nm, bounds=b, grid=grid, eta_grid=eta_grid,
+                    steps=steps, sweeps=sweeps, chunk=chunk, devices=devices,
+                    progress=progress)
 
 
 class _NoBar:

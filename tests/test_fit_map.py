@@ -125,3 +125,53 @@ def test_bad_input_named(change, match):
         args["image"] = img
     with pytest.raises(ValueError, match=match):
         fit_patch_map(args.pop("image"), args.pop("theta_o"), **args)
+
+
+def test_cli_fit_map(wedge, tmp_path, capsys):
+    """``thinfilm-jax fit-map``: the map, PNG and JSON written; per-pixel view angles."""
+    import json
+
+    from thinfilm_jax.cli import main
+
+    d, theta, img = wedge
+    np.save(tmp_path / "img.npy", img)
+    np.save(tmp_path / "theta.npy", np.rad2deg(theta))
+    out = tmp_path / "out"
+    rc = main(["fit-map", str(tmp_path / "img.npy"), "--theta-o-map",
+               str(tmp_path / "theta.npy"), "--alpha", str(ALPHA), "--eta-film", "1.33",
+               "--eta-base", "1.0", "--thickness-range", "0", "1000", "--grid", "101",
+               "--sigma", "0.001", "--out", str(out), "--quiet"])
+    assert rc == 0
+    fitted = np.load(out / "thickness_map.npy")
+    assert np.median(np.abs(fitted - d)) < 1.0  # nm, noise-free
+    summary = json.loads((out / "fit_map.json").read_text())
+    assert summary["shape"] == [H, W] and summary["compile_seconds"] > 0
+    assert (out / "thickness_map.png").read_bytes()[:4] == b"\x89PNG"
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary left
+
+
+@pytest.mark.parametrize("extra, rc_or_exit, match", [
+    (["--theta-o", "20", "--alpha", "0"], 2, "--alpha"),
+    (["--theta-o", "95", "--alpha", "0.2"], 2, "--theta-o"),
+    (["--theta-o", "20", "--alpha", "0.2", "--smoothness", "-5"], 2, "--smoothness"),
+    (["--theta-o-map", "THETA", "--alpha", "0.2"], 1, "does not match"),
+    (["--theta-o", "20", "--alpha", "0.2", "--thickness-range", "500", "100"], 1,
+     "--thickness-range"),
+])
+def test_cli_fit_map_bad_arguments(tmp_path, capsys, extra, rc_or_exit, match):
+    """Usage errors (exit 2) and bad files (exit 1) are one line, before any fitting."""
+    from thinfilm_jax.cli import main
+
+    np.save(tmp_path / "img.npy", np.full((H, W, 3), 0.1))
+    np.save(tmp_path / "theta.npy", np.zeros((3, 3)))
+    extra = [str(tmp_path / "theta.npy") if e == "THETA" else e for e in extra]
+    argv = ["fit-map", str(tmp_path / "img.npy"), "--eta-film", "1.33", "--eta-base", "1.0",
+            "--out", str(tmp_path / "out"), *extra]
+    if rc_or_exit == 2:
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 2
+    else:
+        assert main(argv) == 1
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

@@ -27,9 +27,15 @@ NUMERIC = {
     "thickness": (0.0, None, False, float),
     "thickness_max": (0.0, None, True, float),
     "exposure": (0.0, None, True, float),
+    "eta_outer": (1.0, None, False, float),
+    "theta_o": (0.0, 90.0, False, float),
+    "sigma": (0.0, None, True, float),
+    "smoothness": (0.0, None, True, float),
+    "grid": (2, None, False, int),
+    "thickness_range": (0.0, None, False, float),
 }
 #: sub-commands whose --out is a folder
-FOLDER_OUT = ("figure7", "bench", "render")
+FOLDER_OUT = ("figure7", "bench", "render", "fit-map")
 
 
 def _flag(name: str) -> str:

@@ -1,4 +1,5 @@
-"""Command line: ``thinfilm-jax figure7 | bench | fit`` (also ``python -m thinfilm_jax``)."""
+"""Command line: ``thinfilm-jax figure7 | bench | render | fit | fit-map`` (also
+``python -m thinfilm_jax``)."""
 
 from __future__ import annotations
 
@@ -179,6 +180,10 @@ def build_parser() -> argparse.ArgumentParser:
     ft.add_argument("--out", required=False, help="result JSON path")
     ft.add_argument("--overwrite", action="store_true", help="replace an existing result")
     ft.set_defaults(func=_fit)
+
+    from . import fit_map_cli
+
+    fit_map_cli.add_parser(sub)
     return p
 
 

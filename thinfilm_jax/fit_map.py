@@ -254,7 +254,16 @@ def _fit_map(obs, pix, ctx, model, shape, *, eta0, free, sigma, smoothness_nm, b
         grid_fn = map_sharded(grid_fn, in_axes=(0, 0, None, None, None), devices=devices)
         refine_fn = map_sharded(refine_fn, in_axes=(0, 0, 0, 0, 0) + (None,) * 5,
                                 devices=devices)
-    chunks = [slice(i, min(i + chunk, n)) for i in range(0, n, chunk)]
+    size = min(chunk, n)  # every batch has this size (the last one padded): one compile
+    n_pad = -(-n // size) * size
+    chunks = [slice(i, i + size) for i in range(0, n_pad, size)]
+
+    def pad(a):
+        a = np.asarray(a)
+        return np.concatenate([a, np.repeat(a[-1:], n_pad - n, axis=0)]) if n_pad > n else a
+
+    obs = pad(obs)
+    pix = jax.tree_util.tree_map(pad, pix)
     passes = 1 + (sweeps if smoothness_nm is not None else 1)
     bar = _progress(progress, len(chunks) * passes)
 
@@ -269,7 +278,7 @@ def _fit_map(obs, pix, ctx, model, shape, *, eta0, free, sigma, smoothness_nm, b
                 energy.append(np.asarray(grid_fn(jnp.asarray(obs[s]), take(s), ctx, grid_x,
                                                  sigma)))
                 bar.update(1)
-            energy = np.concatenate(energy).reshape(h, w, grid, e_grid.size)
+            energy = np.concatenate(energy)[:n].reshape(h, w, grid, e_grid.size)
             best_e = np.argmin(energy, axis=-1)  # η₂ index per (pixel, d)
             e_d = np.min(energy, axis=-1)
             tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
@@ -284,17 +293,17 @@ def _fit_map(obs, pix, ctx, model, shape, *, eta0, free, sigma, smoothness_nm, b
                 if smoothness_nm is None:
                     ok = np.zeros_like(ok)
                 out = []
-                xf = x.reshape(-1, 2)
-                nbf, okf = nb.reshape(-1, 4), ok.reshape(-1, 4)
+                xf = pad(x.reshape(-1, 2))
+                nbf, okf = pad(nb.reshape(-1, 4)), pad(ok.reshape(-1, 4))
                 for s in chunks:
                     out.append(jax.tree_util.tree_map(np.asarray, refine_fn(
                         jnp.asarray(obs[s]), take(s), jnp.asarray(xf[s]),
                         jnp.asarray(nbf[s]), jnp.asarray(okf[s]), ctx, sigma,
                         min(tau, 1e30), lo, hi)))
                     bar.update(1)
-                x = np.concatenate([o[0] for o in out]).reshape(h, w, 2)
-                loss = np.concatenate([o[1] for o in out]).reshape(h, w)
-                se = np.concatenate([o[2] for o in out]).reshape(h, w)
+                x = np.concatenate([o[0] for o in out])[:n].reshape(h, w, 2)
+                loss = np.concatenate([o[1] for o in out])[:n].reshape(h, w)
+                se = np.concatenate([o[2] for o in out])[:n].reshape(h, w)
     finally:
         bar.close()
     dt = time.perf_counter() - t0
@@ -325,7 +334,8 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
             (1.2, 1.8) when η₂ is free).
         grid, eta_grid: grid sizes of stage 1; steps: Gauss–Newton steps per sweep;
         sweeps: ICM / Jacobi sweeps of the prior.
-        chunk: pixels per batch (memory; progress granularity).
+        chunk: pixels per batch (memory; progress granularity); every batch has
+            min(chunk, H·W) pixels (the last one padded), so one compilation serves a map.
         observer, options: the map model's observer and `ModelOptions`.
         devices: None (one device), or as `thinfilm_jax.sharding.map_sharded` takes it
             (an int k, devices, or a `Mesh`): each stage's chunks are split across them.

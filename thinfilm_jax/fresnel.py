@@ -42,11 +42,21 @@ def safe_sqrt(x: Array) -> Array:
 
 
 def sqrt_upper(z: Array) -> Array:
-    """Complex √z on the branch Im ≥ 0, finite gradient at z = 0 (double-where)."""
-    zero = z == 0
-    w = jnp.sqrt(jnp.where(zero, 1.0, z))
-    w = jnp.where(jnp.imag(w) < 0, -w, w)
-    return jnp.where(zero, 0.0, w)
+    r"""Complex √z on the branch Im ≥ 0, finite gradient at z = 0 (double-where).
+
+    Written on (x, y) = (Re z, Im z), which XLA:CPU fuses with its neighbours (its own
+    complex square root is several separate loops): with t = √((|z| + |x|)/2) ≥ √(|z|/2) (no
+    cancellation), √z = ±t + i|y|/(2t) for x ≥ 0 (sign of y), and y/(2t) + it for x < 0.
+    """
+    x, y = jnp.real(z), jnp.imag(z)
+    zero = (x == 0) & (y == 0)
+    x = jnp.where(zero, 1.0, x)
+    t = jnp.sqrt(0.5 * (jnp.hypot(x, y) + jnp.abs(x)))
+    h = 0.5 * y / t
+    right = x >= 0
+    re = jnp.where(right, jnp.where(y < 0, -t, t), h)
+    im = jnp.where(right, jnp.abs(h), t)
+    return jax.lax.complex(jnp.where(zero, 0.0, re), jnp.where(zero, 0.0, im))
 
 
 def complex_dtype(*xs):
@@ -62,9 +72,23 @@ def as_complex(x: Array) -> Array:
 
 
 def safe_div(num: Array, den: Array, limit=0.0) -> Array:
-    """num/den, `limit` where den == 0 (double-where)."""
+    """num/den, `limit` where den == 0 (double-where).
+
+    Complex operands are divided on (re, im): num·conj(den)/|den|², den first scaled by
+    1/(|Re den| + |Im den|) (no overflow or underflow of |den|²), one reciprocal shared by
+    both parts; XLA:CPU fuses this, its own complex division is a separate loop.
+    """
     zero = den == 0
-    return jnp.where(zero, limit, num / jnp.where(zero, 1.0, den))
+    if not (jnp.iscomplexobj(num) or jnp.iscomplexobj(den)):
+        return jnp.where(zero, limit, num / jnp.where(zero, 1.0, den))
+    num, den = as_complex(num), as_complex(jnp.where(zero, 1.0, den))
+    dr, di = jnp.real(den), jnp.imag(den)
+    k = 1.0 / (jnp.abs(dr) + jnp.abs(di))
+    dr, di = dr * k, di * k
+    k = k / (dr * dr + di * di)
+    nr, ni = jnp.real(num), jnp.imag(num)
+    q = jax.lax.complex((nr * dr + ni * di) * k, (ni * dr - nr * di) * k)
+    return jnp.where(zero, limit, q)
 
 
 def sin2_outer(eta_outer, cos_theta) -> Array:

@@ -25,6 +25,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from . import _validate as V
+from .airy import sincos_turns
 from .film import Film
 from .fresnel import as_complex, film_interfaces, safe_div
 
@@ -87,8 +88,7 @@ def series_terms(film: Film, cos_theta, *, arithmetic: str = "complex") -> Serie
 
 def series_reflectance(terms: SeriesTerms, wavelength, terms_m: int) -> Array:
     """Truncated series R_M(λ) per polarisation (leading axis 2), M = `terms_m`."""
-    phase = 2.0 * jnp.pi * terms.opd / wavelength
-    e = jax.lax.complex(jnp.cos(phase), jnp.sin(phase))
+    e = jax.lax.complex(*sincos_turns(terms.opd / wavelength))  # phase 2πD/λ, in turns
     ze = as_complex(terms.z) * e
     zm = jnp.ones_like(ze)
     acc = jnp.zeros_like(terms.c0)

@@ -7,7 +7,9 @@ integrator. Conventions (docs/SPEC.md): nm, radians, GGX α, colour bands of uni
 The public face is this file; modules hold one concept each:
 `fresnel` (interface amplitudes), `airy` (exact R), `series` (BB17 terms), `spectra`
 (observers, Ŝ), `reflectance` (band R_j), `lut` (Ŝ(μ,σ²) table), `opd` (D distribution),
-`filtered` (K 29), `microfacet` (GGX/Smith, patch quadrature), `patch` (SPEC §7 methods),
+`filtered` (K 29), `improved` (this library's improved real-time model, issue 11: K 29
+per equal-probability bin of cos θ₁, `method="improved"`), `microfacet` (GGX/Smith, patch
+quadrature), `patch` (SPEC §7 methods),
 `colorimetry` (XYZ/sRGB/ΔE), `fit` (optimistix fits), `cli`. Studies and benchmarks
 (Figure 7, error vs run time, peers, specialisations, stability) live outside the core in
 `thinfilm_jax.studies`, which nothing here imports.
@@ -15,6 +17,7 @@ The public face is this file; modules hold one concept each:
 
 from . import kernels as kernels
 from ._validate import checked as checked
+from .compilation_cache import enable_compilation_cache as enable_compilation_cache
 from .airy import airy_reflectance as airy_reflectance
 from .envmap import SHIPPED as SHIPPED_ENVMAPS
 from .envmap import EnvMap as EnvMap

@@ -68,6 +68,10 @@ def _bench(args) -> int:
 
         cfg = ScalingConfig(**(QUICK if args.quick else {}))
         print(format_table(run_scaling(cfg, out_dir=args.out)))
+    if args.suite in ("improved", "all"):
+        from .studies.improved_study import StudyConfig, run
+
+        run(StudyConfig.quick() if args.quick else StudyConfig(), out=args.out)
     return 0
 
 
@@ -136,10 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
                                    "run time) and measure its error; print a table, write JSON.")
     b.add_argument("--out", default="figures", help="output folder (default: figures)")
     b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
-    b.add_argument("--suite", choices=["core", "ibl", "scaling", "all"], default="core",
+    b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "all"],
+                   default="core",
                    help="core: error vs run time, peers, specialisation (default); ibl: the "
                         "2560×1440 IBL frame and the real-time options' errors; scaling: the "
-                        "large jobs on 1, 2 and 4 devices (subprocesses); all: the three")
+                        "large jobs on 1, 2 and 4 devices (subprocesses); improved: "
+                        "method='improved' against filtered (issue 11: regions, IBL renders, "
+                        "kernel cost, Pareto); all: the four")
     b.set_defaults(func=_bench)
 
     from .envmap import SHIPPED
@@ -193,6 +200,9 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     check_args(parser, args)  # out-of-range options: usage error before any work
+    from .compilation_cache import enable_compilation_cache
+
+    enable_compilation_cache()  # opt out: THINFILM_JAX_NO_CACHE=1
     return run_command(args)  # Ctrl-C and bad input found later: one line, no traceback
 
 

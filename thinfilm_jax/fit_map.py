@@ -19,6 +19,12 @@ can be `jax.vmap`ped, chunked and sharded across devices, `thinfilm_jax.sharding
 Standard errors are the linearised ones of the pixel's own data,
 σ √((JᵀJ)⁻¹)_dd, with σ the given noise level (`sigma`, absolute).
 
+Two front ends share these stages (`_fit_map`), differing only in the per-pixel model
+``model(x, pixel inputs, shared inputs) → (J,)``: `fit_patch_map` (uniform light, SPEC §7:
+`patch_one` at the pixel's θ_o) and `fit_envmap_map` (an environment map, SPEC §9:
+`envmap_radiance(method="filtered")` at the pixel's normal and view, background pixels
+masked out of the fit and the prior).
+
 Example:
     >>> import jax.numpy as jnp
     >>> from thinfilm_jax import Film
@@ -49,7 +55,7 @@ from .options import ModelOptions
 from .patch import METHODS, patch_one
 from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 
-__all__ = ["MapResult", "fit_patch_map", "render_patch_map"]
+__all__ = ["MapResult", "fit_envmap_map", "fit_patch_map", "render_patch_map"]
 
 #: The map model's defaults: the real-time `filtered` path, small quadrature (its moments).
 MAP_OPTIONS = ModelOptions(quadrature=(8, 8), arithmetic="complex")
@@ -147,17 +153,17 @@ def _refine(obs, pix, x0, nb, nb_ok, ctx, sigma, tau, lo, hi, model, steps, free
     return jax.vmap(pixel)(obs, pix, x0, nb, nb_ok)
 
 
-def _neighbours(d):
-    """(H, W, 4) values of the 4-neighbours of each pixel and (H, W, 4) validity."""
-    h, w = d.shape
-    pad = np.pad(d, 1, mode="edge")
-    nb = np.stack([pad[:-2, 1:-1], pad[2:, 1:-1], pad[1:-1, :-2], pad[1:-1, 2:]], axis=-1)
-    ok = np.ones((h, w, 4), bool)
-    ok[0, :, 0] = ok[-1, :, 1] = ok[:, 0, 2] = ok[:, -1, 3] = False
-    return nb, ok
+def _neighbours(d, valid):
+    """(H, W, 4) values of the 4-neighbours of each pixel and (H, W, 4) validity (inside
+    the image and a fitted pixel, `valid` (H, W))."""
+    def shifted(a, fill):
+        p = np.pad(a, 1, mode="constant", constant_values=fill)
+        return np.stack([p[:-2, 1:-1], p[2:, 1:-1], p[1:-1, :-2], p[1:-1, 2:]], axis=-1)
+
+    return shifted(d, 0.0), shifted(valid, False)
 
 
-def _icm(energy, values, tau, sweeps):
+def _icm(energy, values, tau, sweeps, valid):
     """Iterated conditional modes on a (H, W, G) energy over grid `values` (G,) with the
     pairwise prior ½((v_g − v_q)/τ)² between 4-neighbours (checkerboard updates)."""
     idx = np.argmin(energy, axis=-1)
@@ -165,7 +171,7 @@ def _icm(energy, values, tau, sweeps):
     colour = (np.add.outer(np.arange(h), np.arange(w)) % 2).astype(bool)
     for _ in range(sweeps):
         for c in (False, True):
-            nb, ok = _neighbours(values[idx])
+            nb, ok = _neighbours(values[idx], valid)
             pair = 0.5 * np.sum(np.where(ok[..., None], ((values[None, None, None, :]
                                                          - nb[..., None]) / tau) ** 2, 0.0),
                                 axis=2)
@@ -232,11 +238,13 @@ def _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps, sw
     return free, b
 
 
-def _fit_map(obs, pix, ctx, model, shape, *, eta0, free, sigma, smoothness_nm, bounds,
+def _fit_map(obs, pix, ctx, model, valid, *, eta0, free, sigma, smoothness_nm, bounds,
              grid, eta_grid, steps, sweeps, chunk, devices, progress) -> MapResult:
-    """The shared engine: `obs` (P, J), per-pixel model inputs `pix` (a pytree of (P, ...)
-    leaves), shared inputs `ctx`, ``model(x, pix_p, ctx) → (J,)``; (H, W) = `shape`."""
-    h, w = shape
+    """The shared engine: `obs` (P, J) and per-pixel model inputs `pix` (a pytree of
+    (P, ...) leaves) of the P fitted pixels, the True entries of `valid` (H, W) in row-major
+    order; shared inputs `ctx`; ``model(x, pix_p, ctx) → (J,)``. Other pixels are NaN."""
+    h, w = valid.shape
+    where = np.flatnonzero(valid)
     free_eta = "eta_film" in free
     b = bounds
     lo = jnp.asarray([b["thickness"][0], b["eta_film"][0] if free_eta else 0.0])
@@ -278,35 +286,45 @@ def _fit_map(obs, pix, ctx, model, shape, *, eta0, free, sigma, smoothness_nm, b
                 energy.append(np.asarray(grid_fn(jnp.asarray(obs[s]), take(s), ctx, grid_x,
                                                  sigma)))
                 bar.update(1)
-            energy = np.concatenate(energy)[:n].reshape(h, w, grid, e_grid.size)
+            energy_all = np.zeros((h * w, grid * e_grid.size))
+            energy_all[where] = np.concatenate(energy)[:n]
+            energy = energy_all.reshape(h, w, grid, e_grid.size)
             best_e = np.argmin(energy, axis=-1)  # η₂ index per (pixel, d)
             e_d = np.min(energy, axis=-1)
             tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
-            idx = _icm(e_d, d_grid, tau, sweeps) if smoothness_nm is not None \
+            idx = _icm(e_d, d_grid, tau, sweeps, valid) if smoothness_nm is not None \
                 else np.argmin(e_d, axis=-1)
             x = np.stack([d_grid[idx], e_grid[np.take_along_axis(best_e, idx[..., None],
                                                                   -1)[..., 0]]], -1)
             loss = np.take_along_axis(e_d, idx[..., None], -1)[..., 0]
             se = np.full((h, w), np.nan)
             for _ in range(passes - 1):
-                nb, ok = _neighbours(x[..., 0])
+                nb, ok = _neighbours(x[..., 0], valid)
                 if smoothness_nm is None:
                     ok = np.zeros_like(ok)
                 out = []
-                xf = pad(x.reshape(-1, 2))
-                nbf, okf = pad(nb.reshape(-1, 4)), pad(ok.reshape(-1, 4))
+                xf = pad(x.reshape(-1, 2)[where])
+                nbf, okf = pad(nb.reshape(-1, 4)[where]), pad(ok.reshape(-1, 4)[where])
                 for s in chunks:
                     out.append(jax.tree_util.tree_map(np.asarray, refine_fn(
                         jnp.asarray(obs[s]), take(s), jnp.asarray(xf[s]),
                         jnp.asarray(nbf[s]), jnp.asarray(okf[s]), ctx, sigma,
                         min(tau, 1e30), lo, hi)))
                     bar.update(1)
-                x = np.concatenate([o[0] for o in out])[:n].reshape(h, w, 2)
-                loss = np.concatenate([o[1] for o in out])[:n].reshape(h, w)
-                se = np.concatenate([o[2] for o in out])[:n].reshape(h, w)
+                x = x.reshape(-1, 2).copy()
+                x[where] = np.concatenate([o[0] for o in out])[:n]
+                x = x.reshape(h, w, 2)
+                loss = loss.reshape(-1).copy()
+                loss[where] = np.concatenate([o[1] for o in out])[:n]
+                loss = loss.reshape(h, w)
+                se = se.reshape(-1).copy()
+                se[where] = np.concatenate([o[2] for o in out])[:n]
+                se = se.reshape(h, w)
     finally:
         bar.close()
     dt = time.perf_counter() - t0
+    x = np.where(valid[..., None], x, np.nan)
+    loss, se = np.where(valid, loss, np.nan), np.where(valid, se, np.nan)
     return MapResult(jnp.asarray(x[..., 0]), jnp.asarray(x[..., 1]), jnp.asarray(loss),
                      jnp.asarray(se), dt, n / dt)
 
@@ -371,11 +389,115 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
     model = _pixel_model(method, observer, options, float(alpha))
     ctx = tuple(jnp.asarray(float(v)) for v in (initial.eta_base, initial.kappa_base,
                                                 initial.eta_outer))
-    return _fit_map(image.reshape(-1, n_bands), theta.reshape(-1), ctx, model, (h, w),
+    return _fit_map(image.reshape(-1, n_bands), theta.reshape(-1), ctx, model,
+                    np.ones((h, w), bool),
                     eta0=float(initial.eta_film), free=free, sigma=float(sigma),
                     smoothness_nm=smoothness_nm, bounds=b, grid=grid, eta_grid=eta_grid,
                     steps=steps, sweeps=sweeps, chunk=chunk, devices=devices,
                     progress=progress)
+
+
+@functools.lru_cache(maxsize=32)
+def _envmap_model(observer, options, alpha, cross_band):
+    """model(x = (d, η₂), (n, ω_o), ctx = (η₃, κ₃, η₁, prefiltered map)) → (J,): one
+    shading point of `envmap_radiance(method="filtered")` (SPEC §9)."""
+    from .ibl import envmap_radiance  # lazily: the IBL stack only for envmap maps
+
+    def model(x, pix, ctx):
+        film = Film(x[0], x[1], ctx[0], ctx[1], ctx[2])
+        return envmap_radiance(film, alpha, pix[0], pix[1], ctx[3], method="filtered",
+                               observer=observer, options=options, cross_band=cross_band)
+    return model
+
+
+def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
+                   free=("thickness",), sigma: float = 0.01, smoothness_nm=None,
+                   bounds=None, grid: int = 201, eta_grid: int = 7, steps: int = 8,
+                   sweeps: int = 3, chunk: int = 2048, observer: str = DEFAULT_OBSERVER,
+                   options=None, cross_band: bool = True, devices=None,
+                   progress: bool = False) -> MapResult:
+    """Fit a thickness map (optionally η₂) to an image of a film under an environment map.
+
+    The per-pixel model is `envmap_radiance(film, α, n_p, ω_o,p, prefiltered,
+    method="filtered")` (SPEC §9, the real-time path) with the pixel's known unit normal
+    n_p and view direction ω_o,p; the stages (grid, prior, Gauss–Newton) are those of
+    `fit_patch_map` (module docstring). Pixels whose normal is NaN (background) or faces
+    away from the view (⟨n, ω_o⟩ ≤ 0: no signal) are not fitted and come back NaN; they
+    do not take part in the prior.
+
+    Args:
+        image: (H, W, J) band radiances; background pixels may hold anything finite.
+        normal, view: (H, W, 3) unit world vectors (view points toward the eye); a
+            normal of NaN marks a background pixel.
+        prefiltered: `PrefilteredEnvMap` (`prefilter_envmap`, built for `observer`).
+        alpha: GGX roughness α ∈ (0, 1] (known).
+        options: `ModelOptions` of the real-time path (default `ibl.REALTIME_OPTIONS`).
+        cross_band: as `envmap_radiance`.
+        the rest: as `fit_patch_map`.
+
+    Example:
+        >>> import jax.numpy as jnp, numpy as np
+        >>> from thinfilm_jax import Film, prefilter_envmap
+        >>> from thinfilm_jax.ibl import envmap_radiance
+        >>> from thinfilm_jax.fit_map import fit_envmap_map
+        >>> pref = prefilter_envmap(np.ones((8, 16, 3)), levels=3, resolution=(8, 16),
+        ...                         albedo_shape=(8, 5))
+        >>> n = np.array([[[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]]])
+        >>> v = np.broadcast_to([0.0, 0.0, 1.0], n.shape)
+        >>> d = jnp.asarray([[300.0, 420.0]])
+        >>> img = envmap_radiance(Film(d, 1.33, 1.0), 0.2, n, v, pref, method="filtered")
+        >>> res = fit_envmap_map(img, n, v, pref, alpha=0.2, initial=Film(350.0, 1.33, 1.0),
+        ...                      sigma=1e-3, bounds={"thickness": (0.0, 1000.0)}, grid=101)
+        >>> bool(jnp.max(jnp.abs(res.thickness - d)) < 0.5)
+        True
+    """
+    from .ibl import REALTIME_OPTIONS
+    from .prefilter import PrefilteredEnvMap
+
+    V.check_choice("observer", observer, OBSERVERS)
+    free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
+                             sweeps, chunk)
+    if not isinstance(prefiltered, PrefilteredEnvMap):
+        raise ValueError(f"prefiltered must be a PrefilteredEnvMap (prefilter_envmap), got "
+                         f"{type(prefiltered).__name__}")
+    n_bands = get_observer(observer).n_bands
+    nrm = np.asarray(normal, float)
+    h, w = nrm.shape[:2] if nrm.ndim == 3 else (0, 0)
+    if nrm.ndim != 3 or nrm.shape[-1] != 3:
+        raise ValueError(f"normal must have shape (H, W, 3), got {nrm.shape}")
+    vw = np.asarray(view, float)
+    if vw.shape != nrm.shape:
+        raise ValueError(f"view must have the normal's shape {nrm.shape}, got {vw.shape}")
+    img = np.asarray(image)
+    if img.shape != (h, w, n_bands):
+        raise ValueError(f"image must have shape ({h}, {w}, {n_bands}) like normal, got "
+                         f"{img.shape}")
+    bg = np.any(np.isnan(nrm), axis=-1)
+    cos_o = np.where(bg, 0.0, np.sum(np.where(bg[..., None], 0.0, nrm) * vw, axis=-1))
+    valid = ~bg & (cos_o > 1e-6)
+    if not np.any(valid):
+        raise ValueError("no pixel to fit: every normal is NaN or faces away from its view")
+    for name, a in (("normal", nrm[valid]), ("view", vw[valid])):
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite on the fitted pixels")
+        if np.any(np.abs(np.linalg.norm(a, axis=-1) - 1) > 1e-3):
+            raise ValueError(f"{name} must be unit vectors")
+    image = _check_image(np.where(valid[..., None], img, 0.0), observer, float(sigma))
+    if np.ndim(alpha) != 0:
+        raise ValueError(f"alpha must be a scalar, got shape {np.shape(alpha)}")
+    V.check_range("alpha", float(alpha), 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    initial = V.check_film(initial, "initial")
+    if any(np.ndim(v) for v in initial):
+        raise ValueError("initial must be a Film with scalar fields")
+    model = _envmap_model(observer, REALTIME_OPTIONS if options is None else options,
+                          float(alpha), bool(cross_band))
+    ctx = tuple(jnp.asarray(float(v)) for v in (initial.eta_base, initial.kappa_base,
+                                                initial.eta_outer)) + (prefiltered,)
+    pix = (nrm[valid], vw[valid])
+    return _fit_map(image[valid], pix, ctx, model, valid, eta0=float(initial.eta_film),
+                    free=free, sigma=float(sigma), smoothness_nm=smoothness_nm, bounds=b,
+                    grid=grid, eta_grid=eta_grid, steps=steps, sweeps=sweeps, chunk=chunk,
+                    devices=devices, progress=progress)
 
 
 class _NoBar:

@@ -58,7 +58,8 @@ CALLS = {
         FILMS, np.full(N, 0.5), np.full(N, 0.2), method=m,
             options=tf.ModelOptions(shat=s, quadrature=QUAD)))
        for m, s in (("ideal", "exact"), ("filtered", "exact"), ("filtered_gt_moments", "lut"),
-                    ("filtered_gt_moments", "gaussian"), ("filtered_gt_opd", "exact"))},
+                    ("filtered_gt_moments", "gaussian"), ("filtered_gt_opd", "exact"),
+                    ("improved", "lut"))},
 }
 
 

@@ -33,8 +33,10 @@ $$ \bar R_j \approx \frac1K\sum_{k=1}^{K}\Big\{C_0(\bar c_k)\hat S_j(0) + \sum_{
    + \text{c.c.}\big]\Big\}\qquad (\text{K 29 per bin}). $$
 
 The skewed mixture of K Gaussians on D follows the true distribution of D(c), and the C₀
-average is a K-point rule placed where the mass is. K = 2 is the default (K = 3 is more
-accurate and costs 1.5× more); K = 1 is K 29 fed with the exact E[c], Var c (not ⟨ω_o, μ_ω⟩).
+average is a K-point rule placed where the mass is. K = 3 is the default (measured: 1.1–1.2× the
+cost of `filtered` per shading point on a CPU; K = 2 is cheaper and about 1.6× less accurate,
+K = 4 more accurate and dearer: docs/improved.md); K = 1 is K 29 fed with the exact E[c],
+Var c of the lobe instead of ⟨ω_o, μ_ω⟩.
 
 **Table.** c̄_k − cos θ_o and s_k depend only on (θ_o, α) (and the NDF): `bin_table` computes
 them once on the host from the exact half-vector quadrature (`microfacet.patch_quadrature`,
@@ -89,7 +91,7 @@ __all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "lookup_normal
            "lookup_linear", "improved_bands", "improved_kernel", "improved_envmap", "shift_bins",
            "splitsum_projection", "splitsum_projection_at"]
 
-DEFAULT_BINS = 2
+DEFAULT_BINS = 3
 TABLE_SHAPE = (64, 33)  # (√cos θ_o, √α) nodes, as the albedo table
 TABLE_QUADRATURE = (96, 96)  # half-vector quadrature of the table build
 ALPHA_FLOOR = 1e-4  # quadrature floor of α (the √α = 0 column is the exact mirror limit)
@@ -197,7 +199,8 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
     shape = tuple(V.check_int(f"shape[{i}]", s, 2) for i, s in enumerate(shape))
     quadrature = V.check_quadrature(quadrature)
     V.check_choice("ndf", ndf, ("ggx", "beckmann"))
-    host = _bin_table_host(shape, bins, quadrature, ndf, bool(jax.config.jax_enable_x64))
+    with jax.ensure_compile_time_eval():  # a host table, also when first asked for under jit
+        host = _bin_table_host(shape, bins, quadrature, ndf, bool(jax.config.jax_enable_x64))
     return BinTable(*(jnp.asarray(x, dtype) for x in host))
 
 

@@ -12,6 +12,9 @@ float32 (every contraction states its precision).
   the light direction: μ_c = ⟨ω_o, μ_ω⟩, σ_c² = ω_oᵀ Σ_ω ω_o (K 20–21); μ_D, σ_D by the
   Taylor chain (K 25–28); C*_m, φ₂* at cos θ₁* = √((1 + μ_c)/2) (K 22); Ŝ(μ, σ²) from the
   LUT, the exact quadrature or the Gaussian fit.
+* `improved_kernel` — this library's improved model (issue 11, `improved`): K 29 per
+  equal-probability bin of cos θ₁, the bins read from a (θ_o, α) table (`bin_table`);
+  `envmap_radiance` calls it through `improved.improved_envmap`.
 * `lobe_moments` — exact A(θ_o, α), μ_ω, Σ_ω of p_R ∝ ρ̃ ⟨n, ω_i⟩ (K 12, uniform light) in
   the frame n = z, ω_o = (sin θ_o, 0, cos θ_o), from the half-vector quadrature.
 
@@ -29,6 +32,7 @@ from jax import Array
 
 from .film import Film
 from .filtered import filtered_bands
+from .improved import bin_table, improved_kernel  # noqa: F401  (re-exported)
 from .lut import ShatLUT
 from .microfacet import DEFAULT_QUADRATURE, light_moments, patch_quadrature
 from .opd import (OPDMoments, cos_incidence_from_projection, opd_of_cos, project_light_moments,
@@ -36,7 +40,7 @@ from .opd import (OPDMoments, cos_incidence_from_projection, opd_of_cos, project
 from .reflectance import fourier_bands
 from .spectra import DEFAULT_OBSERVER
 
-__all__ = ["ideal_kernel", "filtered_kernel", "lobe_moments"]
+__all__ = ["ideal_kernel", "filtered_kernel", "improved_kernel", "bin_table", "lobe_moments"]
 
 
 def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2,

@@ -113,8 +113,8 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
     """One patch (scalar film fields, θ_o, α) → (n_bands,). The kernel `patch_radiance` maps.
 
     No validation (trace-safe); ``options.arithmetic`` must already be "real" or "complex"
-    and ``options.layer`` "film" or "bare"; method "improved" needs `table`
-    (`improved.bin_table`, built outside any jit). A bare layer (d = 0) replaces each
+    and ``options.layer`` "film" or "bare"; method "improved" reads `table`
+    (`improved.bin_table`; None: the default table). A bare layer (d = 0) replaces each
     method's band reflectance by the exact R₁₃ Ŝ_j(0) at the cosine that method evaluates:
     the nodes c_n (reference), cos θ_o (ideal), cos θ₁* of K 22 (the filtered methods).
     """
@@ -130,6 +130,8 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
         return albedo * ideal_kernel(film, jnp.cos(theta_o), observer=observer, terms=o.terms,
                                      shat="exact", arithmetic=o.arithmetic)
     if method == "improved":
+        if table is None:  # the default table (host-built, cached; fine under jit too)
+            table = bin_table(ndf=o.ndf, dtype=albedo.dtype)
         return albedo * improved_kernel(film, jnp.cos(theta_o), alpha, table, observer=observer,
                                         terms=o.terms, shat=o.shat, lut=lut,
                                         arithmetic=o.arithmetic)

@@ -68,6 +68,7 @@ REALTIME_VARIANTS = (
     ("filtered (LUT)", dict(method="filtered")),
     ("filtered, Gaussian Ŝ", dict(method="filtered", options=ModelOptions(shat="gaussian"))),
     ("filtered, diagonal", dict(method="filtered", cross_band=False)),
+    ("improved (LUT)", dict(method="improved")),
 )
 
 
@@ -111,6 +112,8 @@ OPTION_VARIANTS = (
     ("filtered, 32×64 prefilter", dict(resolution=(32, 64)), dict(method="filtered")),
     ("filtered, 9 levels", dict(levels=9), dict(method="filtered")),
     ("filtered, 33 levels", dict(levels=33), dict(method="filtered")),
+    ("improved (issue 11: bins of cos θ₁, P at the lobe's mean direction)", {},
+     dict(method="improved")),
 )
 
 

@@ -1,4 +1,5 @@
-"""The error-vs-run-time table, its Pareto front and figure (`error_vs_runtime.md/.png`)."""
+"""The error-vs-run-time table, its Pareto front and figures (`error_vs_runtime.md/.png`, and
+`improved_pareto.png`: the real-time kernel options against `method="improved"`)."""
 
 from __future__ import annotations
 
@@ -105,3 +106,37 @@ def pareto_rows(rows, fam):
     t = np.array([rows[i]["warm_s_per_eval"] for i in idx])
     e = np.array([max(rows[i]["dE_p95"], ERROR_FLOOR) for i in idx])
     return [idx[j] for j in pareto_front(t, e)] if idx else []
+
+
+def render_kernel_pareto(rows, path, title: str = "") -> None:
+    """ΔE (mean and p95 panels, log) against cost per shading point (µs, log) of real-time
+    kernel options (rows with "path", "group" ∈ {ideal, filtered, improved}, "us_per_point",
+    "mean", "p95"; `studies.improved_study`), with the Pareto front."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(15, 6.2), constrained_layout=True)
+    colours = {"ideal": "tab:grey", "filtered": "tab:blue", "improved": "tab:red"}
+    for ax, metric in zip(axes, ("mean", "p95")):
+        for g, c in colours.items():
+            sel = [r for r in rows if r["group"] == g]
+            ax.scatter([r["us_per_point"] for r in sel], [r[metric] for r in sel], color=c,
+                       label=g, s=40, zorder=3)
+            for r in sel:
+                ax.annotate(r["path"].replace("filtered K29", "K29"), (r["us_per_point"],
+                            r[metric]), fontsize=7, xytext=(4, 2), textcoords="offset points")
+        t = np.array([r["us_per_point"] for r in rows])
+        e = np.array([r[metric] for r in rows])
+        f = pareto_front(t, e)
+        ax.step(t[f], e[f], where="post", color="k", lw=1, alpha=0.6, label="Pareto front")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("warm cost per shading point, float32, CPU (µs, median, interleaved)")
+        ax.set_ylabel(f"CIEDE2000 ΔE vs reference, {metric} over the wide grid")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(title, fontsize=9)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    plt.close(fig)

@@ -56,7 +56,8 @@ from .stiff import (
     weights_range,
 )
 
-PATCH_METHODS = ("reference", "ideal", "filtered", "filtered_gt_moments", "filtered_gt_opd")
+PATCH_METHODS = ("reference", "ideal", "filtered", "filtered_gt_moments", "filtered_gt_opd",
+                 "improved")
 STABILITY_FUNCTIONS = (
     "airy_reflectance", "airy_reflectance[dielectric]", "rgb_reflectance[spectral]",
     "rgb_reflectance[spectral,cie_1931_2]", "rgb_reflectance[fourier,M=2]",

@@ -1,0 +1,457 @@
+"""Issue 11: `method="improved"` against `filtered` — error by region, IBL renders, cost, Pareto.
+
+``python -m thinfilm_jax.studies.improved_study [--quick] [--out figures]`` writes
+``improved.json``, ``improved.md`` (the tables of docs/improved.md and the README),
+``improved_pareto.png`` (ΔE against cost per shading point, every kernel option) and
+``improved_figure7.png`` (ΔE maps of both methods on the two Figure 7 panel sets);
+``--floor`` writes ``improved_ibl_floor.json`` (`ibl_floor`: what any split-sum method can
+reach under the shipped maps when its film term is exact).
+
+Uniform light (SPEC §7), against `patch_radiance(method="reference")`:
+* the wide grid: 4 materials (`MATERIALS`: κ₃ ∈ {0, 0, 0.5, 3.99}) × d ∈ {300, 600, 1000} nm ×
+  θ_o ∈ {0, 30, 50, 65, 75, 82, 88}° × α ∈ {0.01, 0.06, 0.25, 0.5, 0.9} (the issue's grid
+  plus the soap film), reference quadrature 64²;
+* the Figure 7 panel sets (`figure7.grids`, cell centres) at `fig7_resolution`², quadrature 32².
+Regions: grazing θ_o ≥ 75°, rough α ≥ 0.5, near-mirror α ≤ 0.06 (the rest: "interior").
+
+Image-based lighting (SPEC §9): the sphere renders of `studies.render` (Figures 3–6 setups,
+the three shipped maps), reference values read from ``figures/ibl_render.npz`` (written by
+``thinfilm-jax render``; the masks are checked against the recomputed geometry), `filtered`
+and `improved` recomputed. ΔE with the render's exposure rule.
+
+Cost: the per-shading-point kernels (`kernels.filtered_kernel`, `improved.improved_kernel`,
+`kernels.ideal_kernel`) on `points` float32 points, jit-compiled, timed interleaved (each
+repeat times every row once, so that the load of a shared machine hits all rows alike),
+median of `repeats`. The error of each kernel row is that of kernel × A on the wide grid.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._io import atomic_write, write_json
+from ..colorimetry import delta_e2000
+from ..film import Film
+from ..improved import bin_table, improved_kernel
+from ..kernels import filtered_kernel, ideal_kernel
+from ..lut import build_shat_lut
+from ..microfacet import albedo, splitsum_light_moments
+from ..options import ModelOptions
+from ..patch import patch_radiance
+from ._common import MATERIALS, material_film, view_vector
+from ._timing import environment, jsonable
+from .pareto import render_kernel_pareto
+
+WIDE_THETA_DEG = (0.0, 30.0, 50.0, 65.0, 75.0, 82.0, 88.0)
+WIDE_ALPHA = (0.01, 0.06, 0.25, 0.5, 0.9)
+WIDE_D = (300.0, 600.0, 1000.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyConfig:
+    fig7_resolution: int = 32
+    wide_quadrature: int = 64
+    points: int = 100_000
+    repeats: int = 7
+    ibl: bool = True
+
+    @classmethod
+    def quick(cls):
+        return cls(fig7_resolution=8, wide_quadrature=32, points=5_000, repeats=3)
+
+
+def regions(theta_o, alpha):
+    """Boolean masks of the named regions (grazing, rough, near-mirror, interior)."""
+    deg = np.degrees(theta_o)
+    g, r, m = deg >= 75.0, alpha >= 0.5, alpha <= 0.06
+    return {"all": np.ones_like(g), "grazing θo ≥ 75°": g, "rough α ≥ 0.5": r,
+            "near-mirror α ≤ 0.06": m, "interior": ~(g | r | m)}
+
+
+def _stats(de):
+    return {"mean": float(de.mean()), "p95": float(np.percentile(de, 95)),
+            "max": float(de.max()), "n": int(de.size)}
+
+
+def compare(de_f, de_i, theta_o, alpha, labels):
+    """Per-region statistics of both methods, ratios and the cases worse than filtered."""
+    out = {}
+    for name, m in regions(theta_o, alpha).items():
+        if not m.any():
+            continue
+        f, i = _stats(de_f[m]), _stats(de_i[m])
+        out[name] = {"filtered": f, "improved": i,
+                     "ratio_mean": i["mean"] / f["mean"], "ratio_p95": i["p95"] / f["p95"],
+                     "n_worse_by_1": int(np.sum(de_i[m] > de_f[m] + 1.0)),
+                     "n_better": int(np.sum(de_i[m] < de_f[m]))}
+    excess = de_i - de_f
+    order = np.argsort(-excess)[:8]
+    out["largest_excess"] = [{"case": str(labels[k]), "filtered": float(de_f[k]),
+                              "improved": float(de_i[k])} for k in order if excess[k] > 0]
+    return out
+
+
+def wide_grid():
+    names, d, t, a = np.meshgrid(np.array(list(MATERIALS)), WIDE_D, np.deg2rad(WIDE_THETA_DEG),
+                                 WIDE_ALPHA, indexing="ij")
+    names, d, t, a = (x.ravel() for x in (names, d, t, a))
+    labels = np.array([f"{n} d={x:.0f} θo={np.degrees(y):.0f}° α={z:g}"
+                       for n, x, y, z in zip(names, d, t, a)])
+    return material_film(names, d), t, a, labels
+
+
+def fig7_grid(row: str, n: int):
+    from .figure7 import Figure7Config, _row_inputs
+
+    film, t, a = _row_inputs(Figure7Config(resolution=n), row)
+    shape = t.shape
+    film = Film(*(np.broadcast_to(np.asarray(x, float), shape).ravel() for x in film))
+    t, a = t.ravel(), np.broadcast_to(a, shape).ravel()
+    labels = np.array([f"fig7 d={x:.0f} θo={np.degrees(y):.1f}° α={z:.3g}"
+                       for x, y, z in zip(film.thickness, t, a)])
+    return film, t, a, labels, shape
+
+
+def uniform_light(cfg: StudyConfig, verbose=True):
+    """Both methods on the wide grid and the Figure 7 panel sets, every region."""
+    res, maps = {}, {}
+    opts = {"wide": ModelOptions(quadrature=(cfg.wide_quadrature,) * 2),
+            "fig7": ModelOptions(quadrature=(32, 32))}
+    grids = [("wide", *wide_grid(), None)]
+    for row in ("roughness", "thickness"):
+        grids.append((f"figure7 {row}", *fig7_grid(row, cfg.fig7_resolution)))
+    for name, film, t, a, labels, shape in grids:
+        o = opts["wide" if name == "wide" else "fig7"]
+        t0 = time.perf_counter()
+        v = {m: np.asarray(patch_radiance(film, t, a, method=m, options=o))
+             for m in ("reference", "filtered", "improved")}
+        de_f = np.asarray(delta_e2000(v["filtered"], v["reference"]))
+        de_i = np.asarray(delta_e2000(v["improved"], v["reference"]))
+        res[name] = compare(de_f, de_i, t, a, labels)
+        if shape is not None:
+            maps[name] = (de_f.reshape(shape), de_i.reshape(shape))
+        else:
+            res[name]["_values"] = v
+        if verbose:
+            s = res[name]["all"]
+            print(f"{name}: filtered {s['filtered']['mean']:.2f}/{s['filtered']['p95']:.2f}, "
+                  f"improved {s['improved']['mean']:.2f}/{s['improved']['p95']:.2f} "
+                  f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
+    return res, maps
+
+
+def ibl_renders(verbose=True, npz="figures/ibl_render.npz"):
+    """ΔE of filtered and improved on the render scenes against the stored references."""
+    from ..colorimetry import bands_to_xyz
+    from ..envmap import load_envmap
+    from ..ibl import envmap_radiance
+    from ..prefilter import prefilter_envmap
+    from .render import RenderConfig, _view_azimuth, camera, scene_setups, sphere
+
+    cfg = RenderConfig()
+    z = np.load(npz)
+    cache, rows, all_de = {}, [], {"filtered": [], "improved": []}
+    for i, (scene, label, name, make_film, alpha) in enumerate(scene_setups(cfg)):
+        if name not in cache:
+            env = load_envmap(name)
+            cache[name] = (env, prefilter_envmap(env, observer=cfg.observer))
+        env, pref = cache[name]
+        wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)
+        mask, n = sphere(cfg.resolution, wo, right, up)
+        if not np.array_equal(mask, z[f"r{i}_mask"]):
+            raise RuntimeError(f"{npz} was rendered with another geometry; rerun render")
+        pts = n[mask]
+        film = make_film(pts)
+        ref = z[f"r{i}_reference"]
+        e = float(0.9 / max(np.percentile(bands_to_xyz(ref, cfg.observer)[:, 1], 99), 1e-12))
+        row = {"label": label, "scene": scene, "alpha": alpha}
+        for m in ("filtered", "improved"):
+            v = np.asarray(envmap_radiance(film, alpha, pts, wo, pref, method=m,
+                                           observer=cfg.observer))
+            de = np.asarray(delta_e2000(v * e, ref * e, cfg.observer))
+            row[m] = _stats(de)
+            all_de[m].append(de)
+        rows.append(row)
+        if verbose:
+            print(f"  {label:40s} filtered {row['filtered']['mean']:.2f}/"
+                  f"{row['filtered']['p95']:.2f} improved {row['improved']['mean']:.2f}/"
+                  f"{row['improved']['p95']:.2f}", file=sys.stderr)
+    tot = {m: _stats(np.concatenate(v)) for m, v in all_de.items()}
+    tot["ratio_mean"] = tot["improved"]["mean"] / tot["filtered"]["mean"]
+    tot["ratio_p95"] = tot["improved"]["p95"] / tot["filtered"]["p95"]
+    return {"renders": rows, "all": tot}
+
+
+def ibl_floor(indices=(0, 1, 2, 3, 6), npz="figures/ibl_render.npz", verbose=True):
+    """What a split-sum method can reach under an environment: the film term made exact.
+
+    Per shading point, the exact light-weighted film reflectance of each RGB channel,
+    R̄_jk = ∫ k c_k R_jk / ∫ k c_k (k = ρ̃⟨n,ω_i⟩, the reference's texel quadrature), times
+    the table A and the prefiltered radiance P_k read (a) at (ω_r, √α) as `filtered` and
+    `ideal` do, (b) at the lobe's mean direction and α_eff as `improved` does. ΔE against the
+    stored reference. Costs a reference render per scene (minutes each)."""
+    from ..colorimetry import bands_to_xyz
+    from ..envmap import load_envmap
+    from ..ibl import _interp, _lobe_cos_weight, _r_table, auto_subdivisions, texel_nodes
+    from ..improved import lookup_lobe
+    from ..prefilter import lookup_albedo, lookup_prefiltered, prefilter_envmap
+    from ..uplift import cross_band_name
+    from .render import RenderConfig, _view_azimuth, camera, scene_setups, sphere
+
+    cfg = RenderConfig()
+    z = np.load(npz)
+    obs = cross_band_name(cfg.observer)
+    setups = scene_setups(cfg)
+    tab = bin_table()
+    rows = []
+    for i in indices:
+        scene, label, name, make_film, alpha = setups[i]
+        env = load_envmap(name)
+        pref = prefilter_envmap(env, observer=cfg.observer)
+        wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)
+        mask, n = sphere(cfg.resolution, wo, right, up)
+        pts = n[mask]
+        film = make_film(pts)
+        if np.ndim(film.thickness):
+            raise ValueError("ibl_floor needs one film per scene")
+        d, wt, idx = texel_nodes(*env.shape, auto_subdivisions(env.shape[0], alpha))
+        dirs = jnp.asarray(d)
+        light = jnp.asarray(wt)[:, None] * jnp.asarray(env.radiance).reshape(-1, 3)[idx]
+        table = _r_table(Film(*(jnp.asarray(x) for x in film)), obs, 1024, "complex",
+                         jnp.float64)
+
+        def one(nn, wo=jnp.asarray(wo), dirs=dirs, light=light, table=table, alpha=alpha):
+            w, c = _lobe_cos_weight(dirs, nn, wo, alpha)
+            r = _interp(table, c).reshape(-1, 3, 3)
+            lw = w[:, None] * light
+            return jnp.einsum("njk,nk->jk", r, lw, precision=jax.lax.Precision.HIGHEST), \
+                lw.sum(0)
+
+        num, den = jax.lax.map(jax.jit(one), jnp.asarray(pts), batch_size=16)
+        rbar = np.asarray(num) / np.asarray(den)[:, None, :]
+        nrm = jnp.asarray(pts)
+        view = jnp.broadcast_to(jnp.asarray(wo), nrm.shape)
+        co = jnp.sum(nrm * view, -1)
+        sqa = jnp.full(co.shape, np.sqrt(alpha))
+        a = np.asarray(lookup_albedo(pref, co, sqa))[:, None]
+        ref = z[f"r{i}_reference"]
+        e = float(0.9 / max(np.percentile(bands_to_xyz(ref, cfg.observer)[:, 1], 99), 1e-12))
+        row = {"label": label}
+        dmu, sqe = lookup_lobe(tab, nrm, view, co, jnp.full(co.shape, alpha))
+        for key, (dirn, lev) in {"P at (ω_r, α)": (2 * co[:, None] * nrm - view, sqa),
+                                 "P at (ω_μ, α_eff)": (dmu, sqe)}.items():
+            rad = np.asarray(lookup_prefiltered(pref, dirn, lev)[0])
+            v = a * np.sum(rbar * rad[:, None, :], -1)
+            row[key] = _stats(np.asarray(delta_e2000(v * e, ref * e, cfg.observer)))
+        rows.append(row)
+        if verbose:
+            print(f"  floor {label}: " + ", ".join(f"{k} {row[k]['mean']:.2f}/{row[k]['p95']:.2f}"
+                                                   for k in row if k != "label"),
+                  file=sys.stderr)
+    return rows
+
+
+def kernel_rows(cfg: StudyConfig, ref, verbose=True):
+    """Error (wide grid, kernel × A) and interleaved float32 cost of every kernel option."""
+    film, t, a, _ = wide_grid()
+    co = np.cos(t)
+    A = np.asarray(albedo(t, a))[:, None]
+    mean, cov = (np.asarray(x) for x in splitsum_light_moments(t, a))
+    wo = np.asarray(view_vector(co))
+    n = cfg.points
+    rep = -(-n // len(t))
+    f32 = jnp.float32
+
+    def big(x):
+        return jnp.asarray(np.concatenate([x] * rep)[:n], f32)
+
+    lut = {dt: build_shat_lut(dtype=dt) for dt in (jnp.float64, f32)}
+    tabs = {k: bin_table(k) for k in (1, 2, 3, 4)}
+    filt = {"filtered K29 (shipped: bicubic LUT)": dict(shat="lut"),
+            "filtered K29, exact Ŝ": dict(shat="exact"),
+            "filtered K29, Gaussian Ŝ": dict(shat="gaussian"),
+            "filtered K29, M = 1": dict(shat="lut", terms=1),
+            "filtered K29, M = 3": dict(shat="lut", terms=3)}
+    imp = {"improved K=3 (default: bilinear LUT)": dict(k=3, shat="lut"),
+           "improved K=1": dict(k=1, shat="lut"),
+           "improved K=2": dict(k=2, shat="lut"),
+           "improved K=4": dict(k=4, shat="lut"),
+           "improved K=3, exact Ŝ": dict(k=3, shat="exact"),
+           "improved K=3, Gaussian Ŝ": dict(k=3, shat="gaussian"),
+           "improved K=3, M = 1": dict(k=3, shat="lut", terms=1),
+           "improved K=3, M = 3": dict(k=3, shat="lut", terms=3)}
+    ideal = {"ideal (exact Ŝ)": dict(shat="exact"), "ideal (LUT σ = 0)": dict(shat="lut")}
+    progs = []
+    for name, kw in filt.items():
+        def fn(f, w, m, c, lt, kw=kw):
+            return filtered_kernel(f, w, m, c, lut=lt, **kw)
+        progs.append((name, "filtered", fn, lambda s: (s(film), s(wo), s(mean), s(cov))))
+    for name, kw in imp.items():
+        kw = dict(kw)
+        k = kw.pop("k")
+
+        def fn(f, c, al, tb, lt, kw=kw):
+            return improved_kernel(f, c, al, tb, lut=lt, **kw)
+        progs.append((name, "improved", fn,
+                      lambda s, k=k: (s(film), s(co), s(a), tabs[k])))
+    for name, kw in ideal.items():
+        def fn(f, c, lt, kw=kw):
+            return ideal_kernel(f, c, lut=lt, **kw)
+        progs.append((name, "ideal", fn, lambda s: (s(film), s(co))))
+    rows, timed = [], []
+    for name, group, fn, make in progs:
+        jf = jax.jit(fn)
+        out = np.asarray(jf(*make(lambda x: x), lut[jnp.float64]))
+        de = np.asarray(delta_e2000(A * out, ref))
+        row = {"path": name, "group": group, **_stats(de)}
+        rows.append(row)
+        tf = jax.tree.map(lambda x: big(np.asarray(x)) if np.ndim(x) and np.shape(x)[0] == len(t)
+                          else jnp.asarray(x, f32), make(lambda x: x))
+        args32 = (*tf, lut[f32])
+        jax.block_until_ready(jf(*args32))  # compile
+        timed.append((row, jf, args32))
+    times = {id(r): [] for r, _, _ in timed}
+    for _ in range(cfg.repeats):
+        for row, jf, args in timed:
+            t0 = time.perf_counter()
+            jax.block_until_ready(jf(*args))
+            times[id(row)].append(time.perf_counter() - t0)
+    base = None
+    for row, _, _ in timed:
+        row["us_per_point"] = statistics.median(times[id(row)]) / n * 1e6
+        if row["path"].startswith("filtered K29 (shipped"):
+            base = row["us_per_point"]
+    for row in rows:
+        row["cost_vs_filtered"] = row["us_per_point"] / base
+        if verbose:
+            print(f"  {row['path']:42s} ΔE {row['mean']:.2f}/{row['p95']:.2f} "
+                  f"{row['us_per_point']:.3f} µs ({row['cost_vs_filtered']:.2f}×)",
+                  file=sys.stderr)
+    return rows
+
+
+def plot_fig7(maps, cfg: StudyConfig, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(9, 8), constrained_layout=True)
+    ext = {"figure7 roughness": ([0, 90, 0, 1], "√α"),
+           "figure7 thickness": ([0, 90, 0, 1000], "d (nm)")}
+    im = None
+    for i, (name, (de_f, de_i)) in enumerate(maps.items()):
+        for j, (lab, de) in enumerate((("filtered", de_f), ("improved", de_i))):
+            ax = axes[i, j]
+            im = ax.imshow(de, origin="lower", extent=ext[name][0], aspect="auto",
+                           cmap="magma", vmin=0, vmax=10)
+            ax.set_title(f"{name}: {lab}\nΔE mean {de.mean():.2f}, "
+                         f"p95 {np.percentile(de, 95):.2f}", fontsize=9)
+            ax.set_xlabel("θ_o (°)")
+            ax.set_ylabel(ext[name][1])
+    fig.colorbar(im, ax=axes, shrink=0.7, label="CIEDE2000 ΔE vs reference")
+    fig.suptitle(f"Figure 7 grids ({cfg.fig7_resolution}² patches each; η₂ = 1.3, η₃ = 2.0 + "
+                 "0.5i; d = 600 nm (top), α = 0.25 (bottom)); M = 2, exact Ŝ", fontsize=9)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    plt.close(fig)
+
+
+def markdown(result) -> str:
+    lines = ["## Uniform light: ΔE₀₀ against the reference (mean / p95 / max)", "",
+             "| grid | region | n | filtered | improved | ratio mean | ratio p95 "
+             "| worse by > 1 ΔE |", "|---|---|---|---|---|---|---|---|"]
+    for g, res in result["uniform"].items():
+        for reg, s in res.items():
+            if reg.startswith("_") or reg == "largest_excess":
+                continue
+            f, i = s["filtered"], s["improved"]
+            lines.append(f"| {g} | {reg} | {f['n']} | {f['mean']:.2f} / {f['p95']:.2f} / "
+                         f"{f['max']:.2f} | {i['mean']:.2f} / {i['p95']:.2f} / {i['max']:.2f} "
+                         f"| {s['ratio_mean']:.2f} | {s['ratio_p95']:.2f} "
+                         f"| {s['n_worse_by_1']} |")
+    lines += ["", "Largest excess of improved over filtered (ΔE filtered → improved):", ""]
+    for g, res in result["uniform"].items():
+        ex = ", ".join(f"{e['case']}: {e['filtered']:.2f} → {e['improved']:.2f}"
+                       for e in res["largest_excess"][:4])
+        lines.append(f"- {g}: {ex or 'none'}")
+    if "ibl" in result:
+        ibl = result["ibl"]
+        lines += ["", "## Image-based lighting: sphere renders (ΔE₀₀ mean / p95)", "",
+                  "| render | filtered | improved |", "|---|---|---|"]
+        for r in ibl["renders"]:
+            lines.append(f"| {r['label'].replace(' | ', ' · ')} | {r['filtered']['mean']:.2f} / "
+                         f"{r['filtered']['p95']:.2f} | {r['improved']['mean']:.2f} / "
+                         f"{r['improved']['p95']:.2f} |")
+        a = ibl["all"]
+        lines.append(f"| **all pixels** | {a['filtered']['mean']:.2f} / {a['filtered']['p95']:.2f} "
+                     f"| {a['improved']['mean']:.2f} / {a['improved']['p95']:.2f} "
+                     f"(× {a['ratio_mean']:.2f} / × {a['ratio_p95']:.2f}) |")
+    lines += ["", "## Kernels: error on the wide grid (kernel × A) and float32 cost", "",
+              "| kernel | ΔE mean | ΔE p95 | ΔE max | µs / point | × filtered |",
+              "|---|---|---|---|---|---|"]
+    for r in result["kernels"]:
+        lines.append(f"| {r['path']} | {r['mean']:.2f} | {r['p95']:.2f} | {r['max']:.2f} "
+                     f"| {r['us_per_point']:.3f} | {r['cost_vs_filtered']:.2f} |")
+    env = result["environment"]
+    lines += ["", f"Machine: {env['devices']}, {env['cpu_count']} CPUs, load average "
+              f"{env['load_average']} at start; {result['config']['points']} points, median of "
+              f"{result['config']['repeats']} interleaved repeats."]
+    return "\n".join(lines) + "\n"
+
+
+def run(cfg: StudyConfig = StudyConfig(), out="figures", verbose=True) -> dict:
+    if not jax.config.jax_enable_x64:
+        raise RuntimeError("the study needs float64: jax.config.update('jax_enable_x64', True)")
+    out = Path(out)
+    env = environment()
+    uni, maps = uniform_light(cfg, verbose)
+    ref = uni["wide"].pop("_values")["reference"]
+    result = {"environment": env, "config": dataclasses.asdict(cfg), "uniform": uni}
+    if cfg.ibl:
+        result["ibl"] = ibl_renders(verbose)
+    result["kernels"] = kernel_rows(cfg, ref, verbose)
+    write_json(out / "improved.json", jsonable(result))
+    text = markdown(result)
+    atomic_write(out / "improved.md", lambda tmp: Path(tmp).write_text(text))
+    render_kernel_pareto(result["kernels"], out / "improved_pareto.png",
+                "Real-time kernels, uniform light: error on the wide grid (4 materials × d ≤ "
+                "1000 nm × θ_o ≤ 88° × α ∈ [0.01, 0.9]) against float32 cost per shading "
+                f"point ({env['cpu_count']} shared CPUs)")
+    plot_fig7(maps, cfg, out / "improved_figure7.png")
+    if verbose:
+        print(text)
+    return result
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="figures")
+    p.add_argument("--quick", action="store_true", help="small grids (smoke test)")
+    p.add_argument("--no-ibl", action="store_true", help="skip the IBL renders")
+    p.add_argument("--floor", action="store_true",
+                   help="only the IBL floor of split-sum methods (`ibl_floor`, ≈ 10 min): "
+                        "writes improved_ibl_floor.json")
+    args = p.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)
+    if args.floor:
+        write_json(Path(args.out) / "improved_ibl_floor.json", jsonable(ibl_floor()))
+        return 0
+    cfg = StudyConfig.quick() if args.quick else StudyConfig()
+    if args.no_ibl:
+        cfg = dataclasses.replace(cfg, ibl=False)
+    run(cfg, args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -87,10 +87,13 @@ def render_patch_map(film: Film, theta_o, alpha, *, method: str = "filtered",
                      observer: str = DEFAULT_OBSERVER,
                      options: ModelOptions = MAP_OPTIONS) -> Array:
     """Band radiances (H, W, J) of a film whose fields (H, W) vary per pixel, seen at the
-    per-pixel view angles θ_o (H, W) under uniform light (SPEC §7): the map model."""
+    per-pixel view angles θ_o (H, W) under uniform light (SPEC §7): the map model. The
+    fields and θ_o broadcast together (a scalar θ_o, or a scalar field, is fine)."""
     theta_o = jnp.asarray(theta_o)
     dt = theta_o.dtype if jnp.issubdtype(theta_o.dtype, jnp.floating) else float
-    f = Film(*(jnp.broadcast_to(jnp.asarray(v, dt), theta_o.shape) for v in film))
+    shape = np.broadcast_shapes(theta_o.shape, *(np.shape(v) for v in film))
+    f = Film(*(jnp.broadcast_to(jnp.asarray(v, dt), shape) for v in film))
+    theta_o = jnp.broadcast_to(theta_o.astype(dt), shape)
     model = _pixel_model(method, observer, options, float(alpha))
     out = _render_flat(tuple(v.reshape(-1) for v in (*f, theta_o)), model)
     return out.reshape(*theta_o.shape, -1)

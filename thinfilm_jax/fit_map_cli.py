@@ -179,7 +179,7 @@ def run_fit_map_cli(args) -> int:
     if "eta_film" in args.free:
         eta = np.asarray(res.eta_film)
         atomic_write(out / "eta_film_map.npy", lambda tmp: np.save(tmp, eta))
-    title = (f"{Path(args.image).name}: {h}×{w}, α={args.alpha:g}, η₂={args.eta_film:g}, "
+    title = (f"{Path(args.image).name}: {h}×{w}, α={args.alpha:g}, η₂={args.eta_film:g},\n"
              f"η₃={args.eta_base:g}+{args.kappa_base:g}i, method={args.method}, "
              f"τ={args.smoothness if args.smoothness else 'none'} nm")
     _save_png(out / "thickness_map.png", d, title)

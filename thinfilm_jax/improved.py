@@ -212,6 +212,7 @@ def _bilinear(tab, x, y):
         return i.astype(jnp.int32), t - i
 
     n_x, n_y = tab.shape[:2]
+    x, y = jnp.broadcast_arrays(jnp.asarray(x), jnp.asarray(y))
     i0, fx = cell(x, n_x)
     j0, fy = cell(y, n_y)
     extra = (1,) * (tab.ndim - 2)
@@ -226,6 +227,7 @@ def lookup_bins(table: BinTable, cos_o, alpha):
     (√cos θ_o, √α); c̄_k = cos θ_o + tabulated offset, clamped to [0, 1]."""
     cos_o = jnp.asarray(cos_o)
     st = _bilinear(table.stats, safe_sqrt(cos_o), safe_sqrt(alpha))
+    cos_o = jnp.broadcast_to(cos_o, st.shape[:-2])
     return jnp.clip(cos_o[..., None] + st[..., 0, :], 0.0, 1.0), st[..., 1, :]
 
 
@@ -316,7 +318,8 @@ def lookup_linear(lut: ShatLUT, mu, sigma) -> Array:
     t = lut.table
     env = ((t[im, js] * (1 - u) + t[im + 1, js] * u) * (1 - v)
            + (t[im, js + 1] * (1 - u) + t[im + 1, js + 1] * u) * v)
-    arg = (-2.0 * jnp.pi) * a[..., None] * lut.carrier
+    carrier = jnp.reshape(lut.carrier, (1,) * a.ndim + (-1,))  # ranks aligned explicitly
+    arg = (-2.0 * jnp.pi) * a[..., None] * carrier
     val = env * jax.lax.complex(jnp.cos(arg), jnp.sin(arg))
     val = jnp.where((mu < 0)[..., None], jnp.conj(val), val)
     return jnp.where(inside[..., None], val, jnp.zeros((), complex_dtype(val)))
@@ -336,8 +339,13 @@ def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
         shat: "lut" (bilinear read of `lut`), "exact" or "gaussian".
         arithmetic: "complex" or "real" (κ₃ = 0 only) Fresnel arithmetic.
     """
-    cos_bins = jnp.asarray(cos_bins)
-    f = Film(*(jnp.broadcast_to(jnp.asarray(x)[..., None], cos_bins.shape) for x in film))
+    cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
+    lead = jnp.broadcast_shapes(cos_bins.shape[:-1], std_bins.shape[:-1],
+                                *(jnp.shape(x) for x in film))
+    shape = lead + cos_bins.shape[-1:]
+    cos_bins, std_bins = jnp.broadcast_to(cos_bins, shape), jnp.broadcast_to(std_bins, shape)
+    f = Film(*(jnp.broadcast_to(jnp.broadcast_to(jnp.asarray(x), lead)[..., None], shape)
+               for x in film))
     d = opd_of_cos(f, cos_bins)
     slope = safe_div((2.0 * f.thickness * f.eta_outer) ** 2 * cos_bins, d)  # D'(c)
     sd = jnp.abs(slope) * std_bins
@@ -367,7 +375,9 @@ def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,
         table: `bin_table(...)` (its K is the number of bins).
         observer, terms, shat, lut, arithmetic: as `improved_bands`.
     """
-    cb, sb = lookup_bins(table, cos_o, alpha)
+    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in film), jnp.shape(cos_o),
+                                 jnp.shape(alpha))
+    cb, sb = lookup_bins(table, jnp.broadcast_to(cos_o, shape), jnp.broadcast_to(alpha, shape))
     return improved_bands(film, cb, sb, observer, terms=terms, shat=shat, lut=lut,
                           arithmetic=arithmetic)
 

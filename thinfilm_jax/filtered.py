@@ -24,14 +24,16 @@ SHAT_SOURCES = ("exact", "lut", "gaussian")
 
 def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, terms: int = 2,
                    shat: str = "exact", lut: ShatLUT | None = None,
-                   arithmetic: str = "complex") -> Array:
-    """K 29 band reflectance (..., J) for broadcast inputs (no validation; see patch.py)."""
+                   arithmetic: str = "complex", interpolation: str = "cubic") -> Array:
+    """K 29 band reflectance (..., J) for broadcast inputs (no validation; see patch.py).
+
+    `interpolation` is the LUT read (`lut.lookup`) when shat="lut"."""
     st = series_terms(film, cos_mean, arithmetic=arithmetic)
     dtype = jnp.result_type(cos_mean, float)
     mean, std = opd
     if shat == "lut":
         def shat_m(m):
-            return lookup(lut, -m * mean, m * std)
+            return lookup(lut, -m * mean, m * std, interpolation=interpolation)
     else:
         def shat_m(m):
             return sensitivity_ft(-m * mean, observer, sigma2=(m * std) ** 2, shat=shat)

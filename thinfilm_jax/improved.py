@@ -45,7 +45,7 @@ the grid of the albedo table, and `lookup_bins` reads them bilinearly. Storing o
 cos θ_o makes α → 0 exact: every bin collapses onto c = cos θ_o with s = 0, i.e. `ideal`.
 
 **Ŝ.** ``shat="lut"`` reads the Ŝ(μ, σ²) table of `lut` (the same table `filtered` reads)
-*bilinearly* in (|μ|, σ) (`lookup_linear`), not bicubically: the table stores the slowly
+*bilinearly* in (|μ|, σ) (`lut.lookup(..., interpolation="linear")`), not bicubically: the table stores the slowly
 varying demodulated envelope (≳ 1 µm scale against Δμ = 25 nm), so the bilinear read is
 within 2e-3 of the exact Ŝ and about 10× cheaper on a CPU, which pays for the K bins.
 ``"exact"`` and ``"gaussian"`` are as for `filtered_kernel`.
@@ -90,15 +90,15 @@ import numpy as np
 from jax import Array
 
 from .film import Film
-from .fresnel import complex_dtype, safe_div, safe_sqrt
+from .filtered import filtered_bands
+from .fresnel import safe_div, safe_sqrt
 from .lut import ShatLUT
 from .microfacet import light_moments, patch_quadrature
-from .opd import opd_of_cos
-from .series import fourier_band_reflectance, series_terms
-from .spectra import DEFAULT_OBSERVER, sensitivity_ft, shat_at_zero
+from .opd import OPDMoments, opd_of_cos
+from .spectra import DEFAULT_OBSERVER
 
 __all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "lookup_normal_view",
-           "lookup_linear", "improved_bands", "improved_kernel", "improved_envmap", "shift_bins",
+           "improved_bands", "improved_kernel", "improved_envmap", "shift_bins",
            "splitsum_projection", "splitsum_projection_at"]
 
 DEFAULT_BINS = 3
@@ -305,36 +305,6 @@ def shift_bins(cos_bins, std_bins, mu_x, var_x, mu_x0, var_x0):
 
 
 # ----------------------------------------------------------------------------- kernel
-def lookup_linear(lut: ShatLUT, mu, sigma) -> Array:
-    """Ŝ_j(μ, σ²) from `lut` read bilinearly in (|μ|, σ) (`lut.lookup` reads it bicubically).
-
-    Same table, symmetries and out-of-range rules as `lut.lookup` (0 beyond μ_max, σ clamped
-    at σ_max); shape broadcast(mu, sigma) + (J,), complex. C⁰ in (μ, σ): the derivative is
-    piecewise constant in the envelope (the carrier is exact).
-    """
-    n_mu = lut.table.shape[0] - 3
-    n_sig = lut.table.shape[1] - 3
-    mu, sigma = jnp.broadcast_arrays(jnp.asarray(mu), jnp.asarray(sigma))
-    a = jnp.abs(mu)
-    inside = a <= lut.mu_max
-    tm = jnp.minimum(a, lut.mu_max) / lut.mu_max * (n_mu - 1)
-    ts = jnp.minimum(sigma, lut.sigma_max) / lut.sigma_max * (n_sig - 1)
-    fm = jnp.clip(jnp.floor(tm), 0, n_mu - 2)
-    fs = jnp.clip(jnp.floor(ts), 0, n_sig - 2)
-    im, js = fm.astype(jnp.int32) + 1, fs.astype(jnp.int32) + 1  # row/column 0 is padding
-    cdt = lut.table.dtype
-    u = (tm - fm)[..., None].astype(cdt)
-    v = (ts - fs)[..., None].astype(cdt)
-    t = lut.table
-    env = ((t[im, js] * (1 - u) + t[im + 1, js] * u) * (1 - v)
-           + (t[im, js + 1] * (1 - u) + t[im + 1, js + 1] * u) * v)
-    carrier = jnp.reshape(lut.carrier, (1,) * a.ndim + (-1,))  # ranks aligned explicitly
-    arg = (-2.0 * jnp.pi) * a[..., None] * carrier
-    val = env * jax.lax.complex(jnp.cos(arg), jnp.sin(arg))
-    val = jnp.where((mu < 0)[..., None], jnp.conj(val), val)
-    return jnp.where(inside[..., None], val, jnp.zeros((), complex_dtype(val)))
-
-
 def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
                    terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
                    arithmetic: str = "complex") -> Array:
@@ -359,17 +329,9 @@ def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
     d = opd_of_cos(f, cos_bins)
     slope = safe_div((2.0 * f.thickness * f.eta_outer) ** 2 * cos_bins, d)  # D'(c)
     sd = jnp.abs(slope) * std_bins
-    st = series_terms(f, cos_bins, arithmetic=arithmetic)
-    dtype = jnp.result_type(cos_bins, float)
-    if shat == "lut":
-        def shat_m(m):
-            return lookup_linear(lut, -m * d, m * sd)
-    else:
-        def shat_m(m):
-            return sensitivity_ft(-m * d, observer, sigma2=(m * sd) ** 2, shat=shat)
-    s0 = shat_at_zero(observer, dtype, "gaussian" if shat == "gaussian" else "exact")
-    r = fourier_band_reflectance(st, shat_m, terms, s0)  # (2, ..., K, J)
-    return jnp.mean(r, axis=(0, -2))
+    r = filtered_bands(f, cos_bins, OPDMoments(d, sd), observer, terms=terms, shat=shat,
+                       lut=lut, arithmetic=arithmetic, interpolation="linear")  # (..., K, J)
+    return jnp.mean(r, axis=-2)
 
 
 def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,

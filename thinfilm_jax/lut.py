@@ -99,12 +99,17 @@ def _catmull_rom(f):
                       (-3 * f3 + 4 * f2 + f) / 2, (f3 - f2) / 2], axis=-1)
 
 
-def lookup(lut: ShatLUT, mu, sigma) -> Array:
+def lookup(lut: ShatLUT, mu, sigma, *, interpolation: str = "cubic") -> Array:
     """Ŝ_j(μ, σ²) from the table, shape broadcast(mu, sigma) + (J,), complex.
 
     Args:
         mu: mean optical path μ (nm), any sign.
         sigma: standard deviation σ ≥ 0 (nm), not the variance.
+        interpolation: "cubic" (Catmull–Rom in (|μ|, σ), C¹) or "linear" (bilinear, C⁰,
+            4 taps instead of 16; the real-time read of `improved`, within 2e-3 of exact Ŝ
+            at the default resolution, tests/test_improved.py).
+    The demodulated envelope is interpolated, the carrier e^{−2πi|μ|/λ_c} is exact; Ŝ(−μ) =
+    conj Ŝ(μ); 0 beyond μ_max; σ clamped at σ_max.
     """
     n_mu = lut.table.shape[0] - 3
     n_sig = lut.table.shape[1] - 3
@@ -116,16 +121,26 @@ def lookup(lut: ShatLUT, mu, sigma) -> Array:
     fm = jnp.clip(jnp.floor(tm), 0, n_mu - 2)
     fs = jnp.clip(jnp.floor(ts), 0, n_sig - 2)
     im, is_ = fm.astype(jnp.int32), fs.astype(jnp.int32)
-    wm = _catmull_rom(tm - fm).astype(lut.table.dtype)
-    ws = _catmull_rom(ts - fs).astype(lut.table.dtype)
-    off = jnp.arange(4, dtype=jnp.int32)
-    patch = lut.table[(im[..., None] + off)[..., :, None], (is_[..., None] + off)[..., None, :]]
-    env = jnp.einsum("...a,...b,...abj->...j", wm, ws, patch,
-                     precision=jax.lax.Precision.HIGHEST)
-    arg = (-2.0 * jnp.pi) * a[..., None] * lut.carrier
+    t, cdt = lut.table, lut.table.dtype
+    if interpolation == "cubic":
+        wm, ws = _catmull_rom(tm - fm).astype(cdt), _catmull_rom(ts - fs).astype(cdt)
+        off = jnp.arange(4, dtype=jnp.int32)
+        patch = t[(im[..., None] + off)[..., :, None], (is_[..., None] + off)[..., None, :]]
+        env = jnp.einsum("...a,...b,...abj->...j", wm, ws, patch,
+                         precision=jax.lax.Precision.HIGHEST)
+    elif interpolation == "linear":
+        u, v = (tm - fm)[..., None].astype(cdt), (ts - fs)[..., None].astype(cdt)
+        im, is_ = im + 1, is_ + 1  # row/column 0 is the cubic stencil's padding
+        env = ((t[im, is_] * (1 - u) + t[im + 1, is_] * u) * (1 - v)
+               + (t[im, is_ + 1] * (1 - u) + t[im + 1, is_ + 1] * u) * v)
+    else:
+        raise ValueError(f"unknown interpolation {interpolation!r}; expected 'cubic' or "
+                         f"'linear'")
+    carrier = jnp.reshape(lut.carrier, (1,) * a.ndim + (-1,))  # ranks aligned explicitly
+    arg = (-2.0 * jnp.pi) * a[..., None] * carrier
     val = env * jax.lax.complex(jnp.cos(arg), jnp.sin(arg))
     val = jnp.where((mu < 0)[..., None], jnp.conj(val), val)
-    return jnp.where(inside[..., None], val, 0.0)
+    return jnp.where(inside[..., None], val, jnp.zeros((), val.dtype))
 
 
 def lut_max_error(observer: str = DEFAULT_OBSERVER, n: int = 20000, seed: int = 0,

@@ -364,3 +364,15 @@ def test_stiff_inputs_finite_and_bounded(dtype):
         assert np.all(val <= 1.02 * lmax), method
         g = jax.grad(total, argnums=(0, 1))(film, alpha)
         assert all(np.all(np.isfinite(np.asarray(x))) for x in jax.tree.leaves(g)), method
+
+
+def test_to_equirect_finite_gradient_at_the_poles():
+    """The lookup coordinates of the zenith/nadir have finite derivatives (they used to be
+    NaN: hypot and arctan2 at the origin), and v is continuous through the pole."""
+    from thinfilm_jax.envmap import to_equirect
+
+    for w in (jnp.asarray([0.0, 0.0, 1.0]), jnp.asarray([0.0, 0.0, -1.0])):
+        g = jax.grad(lambda o: jnp.sum(jnp.stack(to_equirect(o))))(w)
+        assert np.all(np.isfinite(np.asarray(g))), g
+    u, v = to_equirect(jnp.asarray([[0.0, 0.0, 1.0], [1e-9, 0.0, 1.0], [0.0, 0.0, -1.0]]))
+    np.testing.assert_allclose(np.asarray(v), [0.0, 1e-9 / np.pi, 1.0], atol=1e-15)

@@ -154,10 +154,17 @@ def texel_centers(h: int, w: int) -> np.ndarray:
 
 
 def to_equirect(omega):
-    """(u, v) ∈ [0, 1)² of unit directions: u = φ/2π (column), v = θ/π (row)."""
+    """(u, v) ∈ [0, 1)² of unit directions: u = φ/2π (column), v = θ/π (row).
+
+    At the poles (x = y = 0) φ is taken as 0; values and gradients stay finite there
+    (double-where: hypot and arctan2 have 0/0 derivatives at the origin)."""
+    x, y = omega[..., 0], omega[..., 1]
     z = jnp.clip(omega[..., 2], -1.0, 1.0)
-    theta = jnp.arctan2(jnp.hypot(omega[..., 0], omega[..., 1]), z)
-    phi = jnp.arctan2(omega[..., 1], omega[..., 0])
+    r2 = x * x + y * y
+    pole = r2 == 0
+    rho = jnp.where(pole, 0.0, jnp.sqrt(jnp.where(pole, 1.0, r2)))
+    theta = jnp.arctan2(rho, z)
+    phi = jnp.where(pole, 0.0, jnp.arctan2(jnp.where(pole, 0.0, y), jnp.where(pole, 1.0, x)))
     return jnp.mod(phi / (2 * jnp.pi), 1.0), theta / jnp.pi
 
 

@@ -230,6 +230,11 @@ def test_realtime_methods_track_the_reference(forest):
     assert np.all(filtered <= split_sum + 0.05), (filtered, split_sum)
     assert np.any(ideal > split_sum + 0.1), (ideal, split_sum)
     assert filtered[:3].mean() < 0.5 * ideal[:3].mean()
+    # `improved` reads the radiance of each bin's part of the lobe (issue 11): the film–light
+    # coupling the split sum loses; measured 0.04 against filtered's 0.17 on these views
+    improved = rel_err(FILM, "improved")
+    assert improved.mean() < 0.5 * filtered.mean() and improved.max() < 0.1, (improved,
+                                                                               filtered)
 
 
 def test_diagonal_equals_cross_band_under_white_light():
@@ -311,7 +316,10 @@ def test_contractions_state_their_precision(method):
                                v, src, method=method, subdivisions=1, n_samples=4)
 
     args = (jnp.float32(500.0), jnp.float32(0.3))
-    assert count_contractions(fn, *args) >= 1
+    if method == "improved":  # elementwise only (per-bin reads, no moments): nothing to fall back
+        assert count_contractions(fn, *args) == 0
+    else:
+        assert count_contractions(fn, *args) >= 1
     assert_contractions_precise(fn, *args)
     if method == "filtered":  # the prefilter's own contractions too (one level)
         from thinfilm_jax.prefilter import _filter_level

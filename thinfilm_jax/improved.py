@@ -50,24 +50,34 @@ varying demodulated envelope (≳ 1 µm scale against Δμ = 25 nm), so the bili
 within 2e-3 of the exact Ŝ and about 10× cheaper on a CPU, which pays for the K bins.
 ``"exact"`` and ``"gaussian"`` are as for `filtered_kernel`.
 
-**Under an environment** (`improved_envmap`, called by `envmap_radiance`):
+**Under an environment** (`improved_envmap`, called by `envmap_radiance`) the light L(ω_i)
+weights the lobe, and the film–light coupling is what a split-sum method loses: a bright
+source at one c. The same bins split it exactly,
 
-$$ L_j = A(\theta_o, \alpha)\sum_k \bar R_{jk}\,P_k(\omega_\mu, \alpha_\mathrm{eff}). $$
+$$ L_j = A\,\mathbb E_{p_R}\big[R(c)\,L(\omega_i)\big]
+       = \frac{A}{K}\sum_{k=1}^{K}\mathbb E\big[R(c)\,L(\omega_i)\,\big|\,c\in B_k\big]
+   \approx \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K} R(\bar c_k, s_k)\,
+       P(\omega_{\mu,k}, \alpha_{\mathrm{eff},k}), $$
 
-(i) The prefiltered radiance P is read at the lobe's mean light direction ω_μ (ω_r rotated
-towards n by a tabulated angle) and at the level α_eff whose normal-view lobe has the same
-total variance tr Σ_ω (`lookup_lobe`), not at (ω_r, α): away from normal view the split-sum
-lobe centred on ω_r is the wrong lobe, and under the shipped maps that error exceeds the
-film's. (ii) The table gives the bins of uniform light; the light-weighted lobe differs by
-the radiance inside it, which the prefiltered moments (read at the same (ω_μ, α_eff)) tell:
-with μ_x, σ_x² their projection on ω_o and μ_x⁰, σ_x⁰² those of a constant map there
-(`splitsum_projection_at`, closed form from the normal-view lobe's E⟨ω_i,n⟩, E⟨ω_i,n⟩²),
-`shift_bins` moves every bin in x = 2c² − 1 = ⟨ω_i, ω_o⟩ by μ_x − μ_x⁰ and scales the bins'
-spread by σ_x/σ_x⁰. A constant environment gives the uniform-light model (tests: 1e-3).
+neglecting only the covariance of R and L inside a bin. P(ω, α) is the prefiltered radiance,
+read per bin at the mean light direction ω_μ,k of the bin's part of the lobe (in the plane
+of n and ω_r by symmetry, tabulated as h_k = sin β_k / sin θ_o, β_k its angle from n) and at
+the level α_eff,k whose normal-view lobe has the same total variance tr Σ_ω (`lookup_lobe`).
+An isotropic read stands for a compact part of the lobe, an arc across it (oblique views);
+near normal view the bins are rings round ω_o ≈ n, which a read centred on their mean (≈ n)
+misplaces. There the mean of the bins' reads is moved to the whole lobe's read (exact at
+θ_o = 0, where the lobe is the prefilter's own kernel) with the tabulated ring weight w:
+
+$$ P_k \leftarrow P_k + w\,\big(P(\omega_\mu, \alpha_\mathrm{eff})
+   - \tfrac1K\textstyle\sum_l P_l\big), $$
+
+so the bins keep only their differences (the coupling). The prefiltered moments are not
+needed; a constant environment gives the uniform-light model exactly (tests: 1e-3, the
+prefilter's accuracy).
 
 Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
 0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,
-at 1.17× its cost per shading point; sphere renders under the shipped maps 0.63 / 0.70 ×.
+at 1.17× its cost per shading point; sphere renders under the shipped maps 0.43 / 0.42 ×.
 Measured gains, cost and the regions where it is not better: docs/improved.md.
 
 Example:
@@ -93,13 +103,12 @@ from .film import Film
 from .filtered import filtered_bands
 from .fresnel import safe_div, safe_sqrt
 from .lut import ShatLUT
-from .microfacet import light_moments, patch_quadrature
+from .microfacet import PatchQuadrature, light_moments, patch_quadrature
 from .opd import OPDMoments, opd_of_cos
 from .spectra import DEFAULT_OBSERVER
 
-__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "lookup_normal_view",
-           "improved_bands", "improved_kernel", "improved_envmap", "shift_bins",
-           "splitsum_projection", "splitsum_projection_at"]
+__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "improved_bins",
+           "improved_bands", "improved_kernel", "improved_envmap"]
 
 DEFAULT_BINS = 3
 TABLE_SHAPE = (64, 33)  # (√cos θ_o, √α) nodes, as the albedo table
@@ -113,16 +122,19 @@ class BinTable(NamedTuple):
 
     stats: (n_u, n_a, 2, K): [0] offsets c̄_k − cos θ_o of the K equal-probability bin means
         of c = cos θ₁, [1] the bin standard deviations s_k.
-    lobe: (n_u, n_a, 2): [0] β − θ_o, the angle from the mirror direction ω_r to the lobe's
-        mean light direction μ_ω/|μ_ω| (negative: towards n), [1] √α_eff, the roughness whose
+    lobe: (n_u, n_a, 2, K + 1): for each bin's part of the lobe (the part whose c lies in
+        the bin) and, last, the whole lobe: [0] h = sin β / sin θ_o, with β the angle of its
+        mean light direction from n towards ω_r (h = 1: ω_r; h < 0: past n, towards ω_o;
+        the ratio is even in θ_o, so smooth at normal view), [1] √α_eff, the roughness whose
         normal-view lobe has the same total variance tr Σ_ω (the prefiltered level to read).
-    normal_view: (n_a, 2): (a, e_z) = (E⟨ω_i,n⟩, E⟨ω_i,n⟩²) of the normal-view lobe
-        (`microfacet.lobe_moments_normal_view`), for `splitsum_projection`.
+    ring: (n_u, n_a): w = 1 − (angle from ω_o to the whole lobe's mean direction) / (mean
+        angle ψ_k = arccos(2c̄_k² − 1) of the bins from ω_o), clipped to [0, 1]: 1 where the
+        bins are rings round ω_o (normal view), 0 where they are arcs across the lobe.
     """
 
     stats: Array
     lobe: Array
-    normal_view: Array
+    ring: Array
 
     @property
     def bins(self) -> int:
@@ -134,10 +146,11 @@ class BinTable(NamedTuple):
 
 # ----------------------------------------------------------------------------- table
 def _bin_stats(theta_o, alpha, bins, quadrature, ndf):
-    """(c̄_k − cos θ_o, s_k) of `bins` equal-mass bins of c under p_R at one (θ_o, α)."""
+    """At one (θ_o, α): (c̄_k − cos θ_o, s_k) (2, K) of `bins` equal-mass bins of c under
+    p_R, and (sin β, tr Σ_ω) (2, K + 1) of each bin's part of the lobe and of the whole."""
     q = patch_quadrature(theta_o, alpha, quadrature=quadrature, ndf=ndf)
     order = jnp.argsort(q.cos_hi)
-    c, w = q.cos_hi[order], q.weight[order]
+    c, w, wi = q.cos_hi[order], q.weight[order], q.wi[order]
     total = jnp.sum(w)
     p = safe_div(w, total)
     hi = jnp.cumsum(p)
@@ -152,10 +165,14 @@ def _bin_stats(theta_o, alpha, bins, quadrature, ndf):
     cos_o = jnp.cos(theta_o)
     ok = mass > 0  # θ_o = 90°: no lobe; the bins sit at the view cosine
     stats = jnp.stack([jnp.where(ok, mean - cos_o, 0.0), jnp.where(ok, jnp.sqrt(var), 0.0)])
-    mu, cov = light_moments(q)  # frame n = z, ω_o = (sin θ_o, 0, cos θ_o): ω_r at −x
-    beta = jnp.arctan2(-mu[0], mu[2])
-    lobe = jnp.stack([jnp.where(total > 0, beta - theta_o, 0.0), jnp.trace(cov),
-                      mu[2], cov[2, 2] + mu[2] ** 2])
+
+    def sub_lobe(pk):  # mean light direction and tr Σ_ω of a part of the lobe
+        mu, cov = light_moments(PatchQuadrature(c, pk, wi))
+        sin_beta = safe_div(-mu[0], jnp.hypot(mu[0], mu[2]))  # frame n = z, ω_r at −x
+        return jnp.stack([sin_beta, jnp.trace(cov)])
+
+    # the K bins' parts, then the whole lobe (the mean of the K parts)
+    lobe = jax.vmap(sub_lobe, out_axes=-1)(jnp.concatenate([part, p[None]]))  # (2, K + 1)
     return stats, lobe
 
 
@@ -172,20 +189,35 @@ def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
     rows = [jax.tree.map(lambda x: np.asarray(x, np.float64),
                          fn(jnp.asarray(t[i], dt), jnp.asarray(a[i], dt))) for i in range(n_u)]
     stats = np.stack([r[0] for r in rows])  # (n_u, n_a, 2, K)
-    lobe = np.stack([r[1] for r in rows])  # (n_u, n_a, 4): β − θ_o, tr Σ, a, e_z
-    # √α_eff: invert tr Σ of the normal-view lobe (θ_o = 0, increasing in α) on a fine grid
+    lobe = np.stack([r[1] for r in rows])  # (n_u, n_a, 2, K + 1): sin β_k, tr Σ_k
+    # h_k = sin β_k / sin θ_o is even in θ_o, hence smooth in √cos θ_o (β_k is not): the
+    # θ_o = 0 row is its limit, extrapolated quadratically in θ_o² from the next three rows
+    # (at θ_o = 0 itself β_k = 0 exactly); the θ_o = 90° row (no lobe) reads along ω_r
+    lobe[1:-1, :, 0] /= np.sin(theta[1:-1])[:, None, None]
+    x = theta[-4:-1] ** 2
+    lag = [np.prod([-x[m] / (x[i] - x[m]) for m in range(3) if m != i]) for i in range(3)]
+    lobe[-1, :, 0] = sum(w * lobe[-4 + i, :, 0] for i, w in enumerate(lag))
+    lobe[0, :, 0] = 1.0
+    # √α_eff: invert tr Σ of the whole normal-view lobe (θ_o = 0, increasing in α)
     sqa_f = np.linspace(0.0, 1.0, 257)
-    tr0 = np.asarray(fn(jnp.zeros(257, dt), jnp.asarray(np.maximum(sqa_f**2, ALPHA_FLOOR),
-                                                        dt))[1][:, 1], np.float64).copy()
+    whole = jax.jit(jax.vmap(functools.partial(_bin_stats, bins=1, quadrature=quadrature,
+                                               ndf=ndf)))
+    tr0 = np.asarray(whole(jnp.zeros(257, dt), jnp.asarray(np.maximum(sqa_f**2, ALPHA_FLOOR),
+                                                           dt))[1][:, 1, -1], np.float64).copy()
     tr0[0] = 0.0
     tr0 = np.maximum.accumulate(tr0)
-    sqa_eff = np.interp(lobe[..., 1], tr0, sqa_f)
-    normal_view = lobe[-1, :, 2:].copy()  # u = 1 row: θ_o = 0
-    normal_view[0] = 1.0
+    lobe[..., 1, :] = np.interp(lobe[..., 1, :], tr0, sqa_f)
+    # ring weight: how close the whole lobe's mean direction is to ω_o against the bins'
+    # angular distance ψ_k = arccos(2c̄_k² − 1) from ω_o (1: the bins are rings round ω_o)
+    sinb = np.clip(lobe[..., 0, -1] * np.sin(theta)[:, None], -1, 1)
+    dist = np.abs(np.arcsin(sinb) + theta[:, None])
+    cb = np.clip(stats[..., 0, :] + np.cos(theta)[:, None, None], 0, 1)
+    psi = np.mean(np.arccos(np.clip(2 * cb**2 - 1, -1, 1)), -1)
+    ring = np.clip(1 - dist / np.maximum(psi, 1e-12), 0, 1)
     stats[:, 0] = 0.0  # √α = 0 is the mirror limit itself: every bin at cos θ_o, no spread
-    out_lobe = np.stack([lobe[..., 0], sqa_eff], axis=-1)
-    out_lobe[:, 0] = 0.0
-    return stats, out_lobe, normal_view
+    lobe[:, 0, 0], lobe[:, 0, 1] = 1.0, 0.0  # ... and every part is ω_r at level 0
+    ring[:, 0] = 0.0
+    return stats, lobe, ring
 
 
 def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
@@ -242,73 +274,28 @@ def lookup_bins(table: BinTable, cos_o, alpha):
 
 
 def lookup_lobe(table: BinTable, normal, view, cos_o, alpha):
-    """(direction (..., 3), √α_eff (...)) at which to read the prefiltered radiance: ω_r
-    rotated towards n by the tabulated angle to the lobe's mean light direction, and the
-    level of equal total variance (`BinTable.lobe`). World vectors; cos_o = ⟨n, ω_o⟩ > 0."""
-    st = _bilinear(table.lobe, safe_sqrt(cos_o), safe_sqrt(alpha))
-    refl = 2.0 * cos_o[..., None] * normal - view
-    b = normal - cos_o[..., None] * refl  # ⟨n, ω_r⟩ = cos θ_o: b ⟂ ω_r, |b| = sin θ_o
-    nb = safe_sqrt(jnp.sum(b * b, axis=-1, keepdims=True))
-    b = safe_div(b, nb)
-    db = st[..., 0:1]
-    d = jnp.cos(db) * refl - jnp.sin(db) * b
+    """Per bin and for the whole lobe, (direction (..., K + 1, 3), √α_eff (..., K + 1)) at
+    which to read the prefiltered radiance (`BinTable.lobe`): the mean light direction of the
+    bin's part of the lobe, d = cos β n + sin β ê in the plane of n and ω_r (ê ⟂ n towards
+    ω_r, sin β = h sin θ_o with the tabulated h, smooth at normal view), and the level of
+    equal total variance. World vectors; cos_o = ⟨n, ω_o⟩ > 0."""
+    st = _bilinear(table.lobe, safe_sqrt(cos_o), safe_sqrt(alpha))  # (..., 2, K + 1)
+    h = st[..., 0, :]
+    tangent = cos_o[..., None] * normal - view  # (sin θ_o) ê = ω_r − cos θ_o n
+    sin2_o = jnp.clip(1.0 - cos_o * cos_o, 0.0, 1.0)[..., None]
+    cos_b = safe_sqrt(jnp.clip(1.0 - h * h * sin2_o, 0.0, 1.0))
+    d = cos_b[..., None] * normal[..., None, :] + h[..., None] * tangent[..., None, :]
     # the equirect lookup's (φ, θ) have no derivative at the poles (arctan2(0, 0)); there the
-    # direction is ω_r = ±z (normal view of a z normal) and Δβ = 0: pass no gradient through
+    # direction is ±z (normal view of a z normal): pass no gradient through
     pole = (d[..., 0] == 0) & (d[..., 1] == 0)
-    return jnp.where(pole[..., None], jax.lax.stop_gradient(d), d), st[..., 1]
-
-
-def lookup_normal_view(table: BinTable, alpha):
-    """(a, e_z) of the normal-view lobe at α (`BinTable.normal_view`, linear in √α)."""
-    nv = table.normal_view
-    n = nv.shape[0]
-    t = jnp.clip(safe_sqrt(alpha), 0.0, 1.0) * (n - 1)
-    i = jnp.clip(jnp.floor(t), 0, n - 2)
-    f = (t - i)[..., None]
-    i = i.astype(jnp.int32)
-    v = nv[i] * (1 - f) + nv[i + 1] * f
-    return v[..., 0], v[..., 1]
-
-
-# ----------------------------------------------------------------------------- environment
-def splitsum_projection_at(r, ez_a):
-    """(μ_x⁰, σ_x⁰²) of x = ⟨ω_i, ω_o⟩ under the split-sum lobe of a constant map centred
-    on a direction ω_c with ⟨ω_o, ω_c⟩ = r.
-
-    The prefiltered lobe is the normal-view lobe rotated onto ω_c (`microfacet.
-    splitsum_light_moments`): μ = a ω_c, Σ = e_t(I − ω_cω_cᵀ) + e_z ω_cω_cᵀ − μμᵀ with
-    (a, e_z) = `ez_a` = E[⟨ω_i,n⟩], E[⟨ω_i,n⟩²] at θ_o = 0 and e_t = (1 − e_z)/2, so
-    μ_x⁰ = a r and σ_x⁰² = e_t(1 − r²) + (e_z − a²) r².
-    """
-    a, ez = ez_a
-    et = (1.0 - ez) / 2.0
-    return a * r, jnp.maximum(et * (1.0 - r * r) + (ez - a * a) * r * r, 0.0)
-
-
-def splitsum_projection(cos_o, ez_a):
-    """`splitsum_projection_at` for the mirror direction ω_r: r = 2cos²θ_o − 1."""
-    return splitsum_projection_at(2.0 * cos_o * cos_o - 1.0, ez_a)
-
-
-def shift_bins(cos_bins, std_bins, mu_x, var_x, mu_x0, var_x0):
-    """Move the uniform-light bins by the environment's change of the lobe (module docstring).
-
-    In x = 2c² − 1: x_k ↦ μ' + g (x_k − μ⁰_tab) with μ' = μ⁰_tab + (μ_x − μ_x⁰),
-    g = σ_x / σ_x⁰ (clipped to [0, 2]), where μ⁰_tab is the mean of the bins; s_k scales by g.
-    Equal to the identity when (μ_x, σ_x²) = (μ_x⁰, σ_x⁰²) (a constant map).
-    """
-    x = 2.0 * cos_bins * cos_bins - 1.0
-    xm = jnp.mean(x, axis=-1, keepdims=True)
-    g = jnp.clip(safe_div(safe_sqrt(var_x), safe_sqrt(var_x0), 1.0), 0.0, 2.0)[..., None]
-    x_new = jnp.clip(xm + (mu_x - mu_x0)[..., None] + g * (x - xm), -1.0, 1.0)
-    return safe_sqrt((1.0 + x_new) / 2.0), g * std_bins
+    return jnp.where(pole[..., None], jax.lax.stop_gradient(d), d), st[..., 1, :]
 
 
 # ----------------------------------------------------------------------------- kernel
-def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
-                   terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
-                   arithmetic: str = "complex") -> Array:
-    """K 29 per bin, averaged over the K bins (module docstring): shape (..., J).
+def improved_bins(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
+                  terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
+                  arithmetic: str = "complex") -> Array:
+    """K 29 in each bin (module docstring): the bins' band reflectances, shape (..., K, J).
 
     Args:
         film: `Film`, fields broadcasting with the leading axes of `cos_bins`.
@@ -329,9 +316,17 @@ def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
     d = opd_of_cos(f, cos_bins)
     slope = safe_div((2.0 * f.thickness * f.eta_outer) ** 2 * cos_bins, d)  # D'(c)
     sd = jnp.abs(slope) * std_bins
-    r = filtered_bands(f, cos_bins, OPDMoments(d, sd), observer, terms=terms, shat=shat,
-                       lut=lut, arithmetic=arithmetic, interpolation="linear")  # (..., K, J)
-    return jnp.mean(r, axis=-2)
+    return filtered_bands(f, cos_bins, OPDMoments(d, sd), observer, terms=terms, shat=shat,
+                          lut=lut, arithmetic=arithmetic, interpolation="linear")
+
+
+def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
+                   terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
+                   arithmetic: str = "complex") -> Array:
+    """The mean of `improved_bins` over the K equal-probability bins: R̄_j (..., J), the
+    model under uniform light. Arguments as `improved_bins`."""
+    return jnp.mean(improved_bins(film, cos_bins, std_bins, observer, terms=terms, shat=shat,
+                                  lut=lut, arithmetic=arithmetic), axis=-2)
 
 
 def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,
@@ -360,52 +355,49 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
                     cross_band: bool = True) -> Array:
     r"""`envmap_radiance(method="improved")` at shading points: L_j (..., J), 0 where ⟨n,ω_o⟩ ≤ 0.
 
-    $$ L_j = A(\theta_o,\alpha)\sum_k \bar R_{jk}\,P_k(\omega_\mu, \alpha_\mathrm{eff}) $$
+    $$ L_j = \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K}\sum_c R_{jc}(\bar c_k, s_k)\,
+       P_c(\omega_{\mu,k}, \alpha_{\mathrm{eff},k}) $$
 
-    * P at the lobe's mean light direction ω_μ and the level α_eff of equal total variance
-      (`lookup_lobe`), not at (ω_r, α): the split-sum lobe centred on ω_r is the wrong
-      lobe away from normal view (rough or grazing), and that error exceeds the film's;
-    * R̄_jk = `improved_bands` on the uniform-light bins moved by `shift_bins` with the
-      prefiltered moments read at the same (ω_μ, α_eff) against those of a constant map
-      there (μ_x⁰ = a⟨ω_o, ω_μ⟩, σ_x⁰² from (a, e_z) of the normal-view lobe at α_eff):
-      a constant environment gives the uniform-light model exactly.
+    Each bin's film reflectance (`improved_bins`) multiplies the prefiltered radiance of its
+    own part of the lobe, read at that part's mean light direction ω_μ,k and equal-variance
+    level α_eff,k (`lookup_lobe`): exact for the light–film coupling between bins
+    (E[R L] = (1/K) Σ_k E[R L | bin k]), the covariance of R and L inside a bin neglected.
+    Near normal view (ring weight w of `BinTable.ring`) the reads' mean is moved to the
+    whole lobe's read. A constant environment gives the uniform-light model exactly. The
+    prefiltered moments are not read: K + 1 radiance reads of 3 channels per point, against
+    `filtered`'s one read of 3 + 9.
 
     Args:
         film: `Film` broadcasting with the shading points.
         alpha: GGX α (...).
         normal, view: unit world vectors (..., 3).
-        pref: `prefilter.PrefilteredEnvMap` (luminance or per-channel moments; per-channel
-            moments are averaged over the channels).
+        pref: `prefilter.PrefilteredEnvMap` (its radiance levels and albedo table).
         table: `bin_table(...)`.
         observer: plain band name (the cross bands are used when `cross_band`).
-        terms, shat, lut, arithmetic: as `improved_bands`; `lut` must hold the bands used
+        terms, shat, lut, arithmetic: as `improved_bins`; `lut` must hold the bands used
             (the map's cross-band table when `cross_band`).
-        cross_band: R_jk under RGB light (SPEC §9) or the diagonal R_j P_j.
+        cross_band: R_jc under RGB light (SPEC §9) or the diagonal R_j P_j.
     """
-    from .opd import project_light_moments
-    from .prefilter import lookup_albedo, lookup_prefiltered, moments_to_mean_cov
+    from .prefilter import lookup_albedo, lookup_radiance
     from .uplift import cross_band_name
 
     cos_o = jnp.sum(normal * view, axis=-1)
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
     a = lookup_albedo(pref, co, safe_sqrt(alpha))
-    dirn, sqa_eff = lookup_lobe(table, normal, view, co, alpha)
-    rad, mom = lookup_prefiltered(pref, dirn, sqa_eff)
-    if mom.ndim > rad.ndim:  # per-channel moments (..., 3, 9)
-        mom = jnp.mean(mom, axis=-2)
-    mean, cov = moments_to_mean_cov(mom)
-    mu_x, var_x = project_light_moments(view, mean, cov)
-    r_mu = jnp.sum(view * dirn, axis=-1)
-    mu_x0, var_x0 = splitsum_projection_at(r_mu, lookup_normal_view(table, sqa_eff**2))
+    dirn, sqa_eff = lookup_lobe(table, normal, view, co, alpha)  # (..., K + 1, 3), (..., K + 1)
+    rad = lookup_radiance(pref, dirn, sqa_eff)  # (..., K + 1, 3)
+    # the bins' reads carry the light–film coupling; where the bins are rings round ω_o
+    # (near normal view) their mean is moved to the whole lobe's read (module docstring)
+    w = _bilinear(table.ring, safe_sqrt(co), safe_sqrt(alpha))[..., None, None]
+    rad = rad[..., :-1, :] + w * (rad[..., -1:, :] - jnp.mean(rad[..., :-1, :], axis=-2,
+                                                             keepdims=True))
     cb, sb = lookup_bins(table, co, alpha)
-    cb, sb = shift_bins(cb, sb, mu_x, var_x, mu_x0, var_x0)
     obs = cross_band_name(observer) if cross_band else observer
-    r = improved_bands(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,
-                       arithmetic=arithmetic)
+    r = improved_bins(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,
+                      arithmetic=arithmetic)  # (..., K, J[·3])
     if cross_band:
         out = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * rad[..., None, :], axis=-1)
     else:
         out = r * rad
-    return jnp.where(up[..., None], a[..., None] * out, 0.0)
-
+    return jnp.where(up[..., None], a[..., None] * jnp.mean(out, axis=-2), 0.0)

@@ -194,16 +194,24 @@ def _level_lerp(pref: PrefilteredEnvMap, sqrt_alpha):
     return i0.astype(jnp.int32), t - i0
 
 
+def _read_levels(pref: PrefilteredEnvMap, table, direction, sqrt_alpha):
+    """`table` (L, h, w, ...) bilinear in direction, linear in √α between levels."""
+    i0, f = _level_lerp(pref, sqrt_alpha)
+    lo = lookup_bilinear(table, direction, i0)
+    hi = lookup_bilinear(table, direction, i0 + 1)
+    ff = f.reshape(f.shape + (1,) * (lo.ndim - f.ndim))
+    return lo * (1 - ff) + hi * ff
+
+
 def lookup_prefiltered(pref: PrefilteredEnvMap, omega_r, sqrt_alpha):
     """(P (..., 3), moments (..., 9) or (..., 3, 9)) at the reflection direction and √α."""
-    i0, f = _level_lerp(pref, sqrt_alpha)
-    out = []
-    for table in (pref.radiance, pref.moments):
-        lo = lookup_bilinear(table, omega_r, i0)
-        hi = lookup_bilinear(table, omega_r, i0 + 1)
-        ff = f.reshape(f.shape + (1,) * (lo.ndim - f.ndim))
-        out.append(lo * (1 - ff) + hi * ff)
-    return tuple(out)
+    return tuple(_read_levels(pref, t, omega_r, sqrt_alpha)
+                 for t in (pref.radiance, pref.moments))
+
+
+def lookup_radiance(pref: PrefilteredEnvMap, direction, sqrt_alpha):
+    """P (..., 3) alone (no moments) at a direction and √α."""
+    return _read_levels(pref, pref.radiance, direction, sqrt_alpha)
 
 
 def lookup_albedo(pref: PrefilteredEnvMap, cos_o, sqrt_alpha):

@@ -211,7 +211,7 @@ def ibl_floor(indices=(0, 1, 2, 3, 6), npz="figures/ibl_render.npz", verbose=Tru
     z = np.load(npz)
     obs = cross_band_name(cfg.observer)
     setups = scene_setups(cfg)
-    tab = bin_table()
+    tab = bin_table(1)  # K = 1: the whole lobe's mean direction and equal-variance level
     rows = []
     for i in indices:
         scene, label, name, make_film, alpha = setups[i]
@@ -246,7 +246,8 @@ def ibl_floor(indices=(0, 1, 2, 3, 6), npz="figures/ibl_render.npz", verbose=Tru
         ref = z[f"r{i}_reference"]
         e = float(0.9 / max(np.percentile(bands_to_xyz(ref, cfg.observer)[:, 1], 99), 1e-12))
         row = {"label": label}
-        dmu, sqe = lookup_lobe(tab, nrm, view, co, jnp.full(co.shape, alpha))
+        dirs, levels = lookup_lobe(tab, nrm, view, co, jnp.full(co.shape, alpha))
+        dmu, sqe = dirs[:, 0], levels[:, 0]  # the one bin
         for key, (dirn, lev) in {"P at (ω_r, α)": (2 * co[:, None] * nrm - view, sqa),
                                  "P at (ω_μ, α_eff)": (dmu, sqe)}.items():
             rad = np.asarray(lookup_prefiltered(pref, dirn, lev)[0])

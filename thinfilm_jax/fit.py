@@ -356,6 +356,27 @@ class FitResult(NamedTuple):
                             "dchi2": float(ck)})
         return out
 
+    def interval(self, level: float = 0.95, *, absolute_sigma: bool = False) -> dict:
+        """{name: (low, high)} confidence intervals, fitted value ± q · stderr.
+
+        With s² estimated from the residuals (the default), (fit − truth)/stderr follows
+        Student's t with n − p degrees of freedom (n observations, p free parameters), not
+        N(0, 1): q is its (1 + level)/2 quantile (few views: 12 observations and 3 free
+        parameters give q = 2.26 at 95 %, where ±2 SE covers 92.3 %). Pass
+        ``absolute_sigma=True`` when the fit was (σ known): then q is the normal quantile.
+        Measured calibration (1 % noise, 200 films): README "Fitting", `studies.coverage`.
+        Local to this minimum: see `ambiguous` for other fringe orders.
+        """
+        from scipy.stats import norm, t
+
+        if not 0.0 < float(level) < 1.0:
+            raise ValueError(f"level must be in (0, 1), got {level!r}")
+        dof = int(np.asarray(self.residuals).size) - len(self.free)
+        q = norm.ppf(0.5 + level / 2) if absolute_sigma or dof < 1 else t.ppf(0.5 + level / 2,
+                                                                               dof)
+        return {k: (float(v) - q * float(self.stderr[k]), float(v) + q * float(self.stderr[k]))
+                for k, v in self.params.items()}
+
     @property
     def params(self) -> dict:
         """{name: fitted value} of the free parameters."""
@@ -621,31 +642,54 @@ def _best_distinct(ys, losses, m, distinct):
 
 
 def _orders_fn(spec, x0, cos_outer, lam, n_orders):
-    """`orders(y)` for `_pipeline`: starting points ±1 … ±n_orders fringe orders from y.
+    """`orders(y)` for `_pipeline`: starting points ±1 … ±n_orders fringe orders from y,
+    then, when η₂ is free, moves along the d–η₂ ridge.
 
     One order of the film's interference is a change of the optical path D = 2 η₂ d cos θ₂
     by one (mean) wavelength λ̄, i.e. Δd = λ̄ / (2 η₂ ⟨cos θ₂⟩) at the current η₂ (cos θ₂ by
-    Snell from the views' cos θ₁, averaged over them). Only the thickness moves; the short
-    solves then let every free parameter follow. None when thickness is not free.
+    Snell from the views' cos θ₁, averaged over them). The order moves change only the
+    thickness. The ridge moves (η₂ free) set η₂' = η₂ · (1 ± 0.08), (1 ± 0.16) and the
+    thickness that keeps the optical thickness η₂ d, and that ± one order: the data fix η₂ d
+    far better than η₂ (a wrong η₂ at the right η₂ d fits nearly as well: issue 13, film
+    d = 1090 nm, η₂ = 1.31 fitted as 1163 nm, 1.23 from four views), and the short solves
+    from one (d, η₂) pair do not cross the barriers between such minima. None when
+    thickness is not free.
     """
     if "thickness" not in spec.free or n_orders < 1:
         return None, None
     k = spec.free.index("thickness")
+    j = spec.free.index("eta_film") if "eta_film" in spec.free else None
     ks = np.concatenate([-np.arange(n_orders, 0, -1), np.arange(1, n_orders + 1)])
+    ridge_eta = np.asarray([0.92, 1.08, 0.84, 1.16])
+    ridge_k = np.asarray([0.0, -1.0, 1.0])  # orders, then η₂' (below)
+
+    def cos2(eta1, eta2):  # ⟨cos θ₂⟩ over the views (Snell)
+        s1 = 1.0 - cos_outer * cos_outer
+        return jnp.mean(jnp.sqrt(jnp.clip(1.0 - (eta1 / eta2) ** 2 * s1, 1e-4, 1.0)))
 
     def step(y):
         x = spec.with_free(spec.x_free(y), x0)
-        eta1, eta2 = x[4], x[1]
-        s1 = 1.0 - cos_outer * cos_outer
-        c2 = jnp.sqrt(jnp.clip(1.0 - (eta1 / eta2) ** 2 * s1, 1e-4, 1.0))
-        return lam / (2.0 * eta2 * jnp.mean(c2))
+        return lam / (2.0 * x[1] * cos2(x[4], x[1]))
 
     def orders(y):
         xf = spec.x_free(y)
         lo, hi = jnp.asarray(spec.lo[k], y.dtype), jnp.asarray(spec.hi[k], y.dtype)
+        margin = _START_MARGIN * (hi - lo)
         d = xf[k] + jnp.asarray(ks, y.dtype) * step(y)
-        d = jnp.clip(d, lo + _START_MARGIN * (hi - lo), hi - _START_MARGIN * (hi - lo))
         xs = jnp.broadcast_to(xf, (ks.size, xf.shape[0])).at[:, k].set(d)
+        if j is not None:
+            x = spec.with_free(xf, x0)
+            elo, ehi = jnp.asarray(spec.lo[j], y.dtype), jnp.asarray(spec.hi[j], y.dtype)
+            e_m = _START_MARGIN * (ehi - elo)
+            e2 = jnp.clip(xf[j] * jnp.asarray(ridge_eta, y.dtype), elo + e_m, ehi - e_m)
+            c2 = jax.vmap(lambda e: cos2(x[4], e))(e2)
+            # the same η₂ d (the path at normal incidence), then ± one order at η₂'
+            d2 = (x[1] * x[0] / e2[None, :] + jnp.asarray(ridge_k, y.dtype)[:, None] * lam
+                  / (2.0 * e2 * c2)[None, :]).reshape(-1)
+            xr = jnp.broadcast_to(xf, (d2.size, xf.shape[0]))
+            xr = xr.at[:, k].set(d2).at[:, j].set(jnp.tile(e2, ridge_k.size))
+            xs = jnp.concatenate([xs, xr])
+        xs = xs.at[:, k].set(jnp.clip(xs[:, k], lo + margin, hi - margin))
         return jax.vmap(spec.y_of)(xs)
 
     def distinct(y1, y2):

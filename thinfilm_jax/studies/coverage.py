@@ -79,6 +79,12 @@ def one_fit(obs, theta, p, free, method):
     }
 
 
+def _t_cdf(x, dof):
+    from scipy.stats import t
+
+    return float(t.cdf(x, dof))
+
+
 def student_t_quantile(q, dof):
     from scipy.stats import t
 
@@ -108,9 +114,22 @@ def summarise_coverage(rows, free):
            "converged_fraction": float(np.mean([r["converged"] for r in rows])),
            "time_per_fit_s": float(np.median([r["time_s"] for r in rows])),
            "nominal": {"1se": math.erf(1 / math.sqrt(2)), "2se": math.erf(2 / math.sqrt(2))},
+           # ±1, ±2 SE under Student's t (s² from the residuals), averaged over the fits
+           "nominal_student_t": {
+               "1se": float(np.mean([2 * _t_cdf(1.0, r["n_obs"] - r["n_free"]) - 1
+                                     for r in rows])),
+               "2se": float(np.mean([2 * _t_cdf(2.0, r["n_obs"] - r["n_free"]) - 1
+                                     for r in rows]))},
            "coverage": {}, "coverage_right_basin": {}, "median_abs_z": {}}
+    from scipy.stats import t
+
+    dofs = np.array([r["n_obs"] - r["n_free"] for r in rows])
+    out["t_interval_coverage"] = {}  # `FitResult.interval`: Student-t with each fit's n − p
     for k in free:
         a = np.abs(z[k])
+        out["t_interval_coverage"][k] = {
+            f"{lvl:.3f}": float(np.mean(a <= t.ppf(0.5 + lvl / 2, dofs)))
+            for lvl in (out["nominal"]["1se"], out["nominal"]["2se"])}
         out["coverage"][k] = {"1se": float(np.mean(a <= 1)), "2se": float(np.mean(a <= 2))}
         out["coverage_right_basin"][k] = {"1se": float(np.mean(a[basin] <= 1)),
                                           "2se": float(np.mean(a[basin] <= 2))}
@@ -234,9 +253,15 @@ def print_table(result):
               f"{s['right_basin_fraction']:.3f}, ambiguous {s['ambiguous_fraction']:.3f}")
         for k in FREE_COVERAGE:
             c, cb = s["coverage"][k], s["coverage_right_basin"][k]
+            ti = s.get("t_interval_coverage", {}).get(k, {})
             print(f"  {k:10s} within 1 SE {c['1se']:.3f} (right basin {cb['1se']:.3f})  "
                   f"within 2 SE {c['2se']:.3f} (right basin {cb['2se']:.3f})  "
-                  f"median |z| {s['median_abs_z'][k]:.3f}")
+                  f"median |z| {s['median_abs_z'][k]:.3f}  t-intervals 68.3/95.4 %: "
+                  + " / ".join(f"{v:.3f}" for v in ti.values()))
+        if "nominal_student_t" in s:
+            nt = s["nominal_student_t"]
+            print(f"  expected for ±1/±2 SE under Student t (n − p dof): {nt['1se']:.3f} / "
+                  f"{nt['2se']:.3f}")
 
 
 def main(argv=None):
@@ -255,6 +280,11 @@ def main(argv=None):
 
         with open(args.from_json) as f:
             result = json.load(f)
+        for m, rows in result["per_fit"].items():  # summaries as this version computes them
+            if rows["coverage"]:
+                result["coverage"][m] = summarise_coverage(rows["coverage"], FREE_COVERAGE)
+            if rows["global"]:
+                result["global"][m] = summarise_global(rows["global"])
         print_table(result)
         if args.figure:
             plot(result, args.figure)

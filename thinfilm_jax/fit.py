@@ -26,7 +26,9 @@ wrong one. When the thickness is free the solve is multi-start, in these stages:
 
 1. *screen*: the loss at `n_starts` thicknesses (default 64: midpoints of equal cells of the
    thickness box, 31 nm apart over [0, 2000] nm, so every ~±100 nm basin holds several) plus
-   the initial guess, other parameters at their initial values: one model evaluation each;
+   the initial guess, other parameters at their initial values: one model evaluation each,
+   ranked by the loss profiled over a brightness gain (the guesses of α and η₂ scale the
+   brightness more than they move the fringes);
 2. *short solves* from the `n_solves` (8) most promising starts (the lowest local minima of
    the screened loss along the grid), `start_steps` (50) solver steps each, all free
    parameters moving (a wrong η₂ guess shifts every fringe: the solves slide along the
@@ -37,7 +39,9 @@ wrong one. When the thickness is free the solve is multi-start, in these stages:
    missed 3 of 80 noise-free films of the issue-13 set (d 150–1200 nm, η₂ 1.2–1.7, six
    views 0–70°, one initial guess d = 500 nm, η₂ = 1.4): each landed one order too thick
    with η₂ nearly right (d 805 → 1003, 1170 → 1370, 981 → 1171 nm); with this stage all
-   three are found (`python -m thinfilm_jax.studies.coverage`).
+   three are found (`python -m thinfilm_jax.studies.coverage`). When η₂ is free the same
+   round also starts on the d–η₂ ridge: η₂ · (1 ± 0.08), (1 ± 0.16) at the same optical
+   thickness η₂ d and ± one order (the data fix η₂ d far better than η₂).
 3. *polish*: the 1 + `n_alternatives` (3) best *distinct* minima (thickness more than a
    quarter order apart), ranked by the final model, are solved to convergence with it
    (`max_steps`, implicit adjoint); the best is the answer, the others are reported as

@@ -204,8 +204,9 @@ def plot(result, path):
     methods = [m for m in result["coverage"]]
     if not methods:
         return
-    fig, axes = plt.subplots(1, len(FREE_COVERAGE) + 1, figsize=(4 * (len(FREE_COVERAGE) + 1),
-                                                                   3.4), layout="constrained")
+    fig, axes = plt.subplots(1, len(FREE_COVERAGE) + 1, figsize=(4 * (len(FREE_COVERAGE) + 1)
+                                                                   + 1.5, 3.4),
+                             layout="constrained")
     zgrid = np.linspace(-4, 4, 200)
     names = {"thickness": "d", "eta_film": "η₂", "alpha": "α"}
     for j, k in enumerate(FREE_COVERAGE):
@@ -220,22 +221,30 @@ def plot(result, path):
                title=f"{names[k]}: standardised error")
         ax.legend(fontsize=7)
     ax = axes[-1]
-    width = 0.8 / max(len(methods), 1)
-    for i, m in enumerate(methods):
-        cov = result["coverage"][m]["coverage"]
-        for lvl, hatch in (("1se", ""), ("2se", "//")):
-            vals = [cov[k][lvl] for k in FREE_COVERAGE]
-            x = np.arange(len(FREE_COVERAGE)) + i * width + (0.0 if lvl == "1se" else 0.0)
-            ax.bar(x + (0 if lvl == "1se" else 0.02), vals, width * 0.9, alpha=0.5,
-                   hatch=hatch, label=f"{m} within {lvl[0]} SE")
-    nom = result["coverage"][methods[0]]["nominal"]
-    ax.axhline(nom["1se"], color="k", ls=":", lw=1, label="nominal 68.3 %")
-    ax.axhline(nom["2se"], color="k", ls="--", lw=1, label="nominal 95.4 %")
-    ax.set_xticks(np.arange(len(FREE_COVERAGE)) + 0.4 - width / 2,
-                  [names[k] for k in FREE_COVERAGE])
-    ax.set(ylim=(0, 1.05), ylabel="fraction of all fits with |fit − truth| ≤ k SE",
-           title="coverage (all fits)")
-    ax.legend(fontsize=6, loc="lower right")
+    m = methods[0]
+    summ = result["coverage"][m]
+    cov, tcov = summ["coverage"], summ.get("t_interval_coverage", {})
+    bars = [("±1 SE", lambda k: cov[k]["1se"], "C0", ""),
+            ("t interval 68.3 %", lambda k: list(tcov[k].values())[0], "C0", "//"),
+            ("±2 SE", lambda k: cov[k]["2se"], "C1", ""),
+            ("t interval 95.4 %", lambda k: list(tcov[k].values())[1], "C1", "//")]
+    if not tcov:
+        bars = bars[::2]
+    width = 0.8 / len(bars)
+    x0 = np.arange(len(FREE_COVERAGE))
+    for i, (label, val, colour, hatch) in enumerate(bars):
+        ax.bar(x0 + i * width, [val(k) for k in FREE_COVERAGE], width * 0.9, color=colour,
+               alpha=0.6, hatch=hatch, label=label)
+    nom = summ["nominal"]
+    ax.axhline(nom["1se"], color="k", ls=":", lw=1, label="nominal 68.3 % / 95.4 %")
+    ax.axhline(nom["2se"], color="k", ls=":", lw=1)
+    if "nominal_student_t" in summ:
+        nt = summ["nominal_student_t"]
+        ax.axhline(nt["2se"], color="C3", ls="--", lw=1, label=f"±2 SE under t: {nt['2se']:.3f}")
+    ax.set_xticks(x0 + 0.4 - width / 2, [names[k] for k in FREE_COVERAGE])
+    ax.set(ylim=(0.5, 1.02), ylabel="fraction of fits covering the truth",
+           title=f"coverage ({m}, all {summ['n']} fits)")
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     n = result["coverage"][methods[0]]["n"]
     fig.suptitle(f"fit_film, d, η₂, α free, 1 % Gaussian noise, {n} films "
                  f"(d 150–1200 nm, η₂ 1.2–1.7, α 0.1–0.4; 4–9 views), one initial guess",

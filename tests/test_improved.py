@@ -208,3 +208,10 @@ def test_patch_float32_matches_float64():
                                     a.astype(np.float32), method="improved", options=opts))
     assert v32.dtype == np.float32
     np.testing.assert_allclose(v32, v64, atol=2e-5)
+
+
+@pytest.mark.parametrize("shape", [(3, 9), (16,), (16, 1)])
+def test_bin_table_rejects_bad_shapes(shape):
+    """The θ_o = 0 row of the direction table is extrapolated from three interior rows."""
+    with pytest.raises(ValueError, match="shape"):
+        bin_table(shape=shape)

@@ -202,7 +202,7 @@ def test_bare_layer_specialisation_is_the_bare_interface():
         got = np.asarray(tf.rgb_reflectance(f0, c, method=method))
         np.testing.assert_allclose(got, want[:, None] * np.ones(3), rtol=1e-12, atol=1e-15)
     q = ModelOptions(quadrature=(16, 16))
-    for m in ("reference", "ideal", "filtered_gt_moments", "filtered"):
+    for m in ("reference", "ideal", "filtered_gt_moments", "filtered", "improved"):
         bare = np.asarray(patch_radiance(f0, 0.9, 0.3, method=m, options=q))
         film = np.asarray(patch_radiance(f0, 0.9, 0.3, method=m,
                                          options=q._replace(layer="film")))

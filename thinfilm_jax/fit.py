@@ -367,8 +367,9 @@ class FitResult(NamedTuple):
         Student's t with n − p degrees of freedom (n observations, p free parameters), not
         N(0, 1): q is its (1 + level)/2 quantile (few views: 12 observations and 3 free
         parameters give q = 2.26 at 95 %, where ±2 SE covers 92.3 %). Pass
-        ``absolute_sigma=True`` when the fit was (σ known): then q is the normal quantile.
-        Measured calibration (1 % noise, 200 films): README "Fitting", `studies.coverage`.
+        ``absolute_sigma=True`` when the fit used ``FitOptions(absolute_sigma=True)`` (σ
+        known): then q is the normal quantile. Measured calibration (1 % noise, 200 films):
+        README "The global minimum and honest error bars", `studies.coverage`.
         Local to this minimum: see `ambiguous` for other fringe orders.
         """
         from scipy.stats import norm, t
@@ -681,7 +682,7 @@ def _orders_fn(spec, x0, cos_outer, lam, n_orders):
     j = spec.free.index("eta_film") if "eta_film" in spec.free else None
     ks = np.concatenate([-np.arange(n_orders, 0, -1), np.arange(1, n_orders + 1)])
     ridge_eta = np.asarray([0.92, 1.08, 0.84, 1.16])
-    ridge_k = np.asarray([0.0, -1.0, 1.0])  # orders, then η₂' (below)
+    ridge_k = np.asarray([0.0, -1.0, 1.0])  # fringe orders added at each ridge η₂'
 
     def cos2(eta1, eta2):  # ⟨cos θ₂⟩ over the views (Snell)
         s1 = 1.0 - cos_outer * cos_outer

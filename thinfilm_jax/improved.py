@@ -227,8 +227,8 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
 
     Args:
         bins: K ≥ 1 equal-probability bins of cos θ₁.
-        shape: (n_u, n_a) nodes in √cos θ_o and √α (√α = 0: the mirror limit, offsets and
-            spreads 0).
+        shape: (n_u ≥ 5, n_a ≥ 2) nodes in √cos θ_o and √α (√α = 0: the mirror limit,
+            offsets and spreads 0).
         quadrature: (n_u, n_φ) of the half-vector quadrature of each node.
         ndf: "ggx" or "beckmann".
         dtype: float dtype of the table.
@@ -238,7 +238,10 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
     from . import _validate as V
 
     bins = V.check_int("bins", bins, 1)
-    shape = tuple(V.check_int(f"shape[{i}]", s, 2) for i, s in enumerate(shape))
+    if not isinstance(shape, (tuple, list)) or len(shape) != 2:
+        raise ValueError(f"shape must be (n_u, n_a), got {shape!r}")
+    shape = (V.check_int("shape[0]", shape[0], 5),  # the θ_o = 0 limit needs 3 interior rows
+             V.check_int("shape[1]", shape[1], 2))
     quadrature = V.check_quadrature(quadrature)
     V.check_choice("ndf", ndf, ("ggx", "beckmann"))
     with jax.ensure_compile_time_eval():  # a host table, also when first asked for under jit

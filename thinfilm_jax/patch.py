@@ -31,7 +31,7 @@ from . import _validate as V
 from .airy import choose_arithmetic
 from .film import Film
 from .filtered import filtered_bands
-from .improved import BinTable, bin_table, improved_kernel
+from .improved import BinTable, bin_table, improved_kernel, lookup_bins
 from .lut import ShatLUT, build_shat_lut
 from .microfacet import (light_moments, patch_quadrature, sample_patch_mc,
                          splitsum_light_moments, view_direction)
@@ -116,12 +116,13 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
     and ``options.layer`` "film" or "bare"; method "improved" reads `table`
     (`improved.bin_table`; None: the default table). A bare layer (d = 0) replaces each
     method's band reflectance by the exact R₁₃ Ŝ_j(0) at the cosine that method evaluates:
-    the nodes c_n (reference), cos θ_o (ideal), cos θ₁* of K 22 (the filtered methods).
+    the nodes c_n (reference), cos θ_o (ideal), cos θ₁* of K 22 (the filtered methods), the
+    bin means c̄_k (improved, averaged over the bins).
     """
     o = options
     quad = patch_quadrature(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
-    if o.layer == "bare" and method != "improved":
-        return _bare_patch(film, theta_o, alpha, quad, method, observer, o)
+    if o.layer == "bare":
+        return _bare_patch(film, theta_o, alpha, quad, method, observer, o, table)
     if method == "reference":
         rj = spectral_bands(film, quad.cos_hi, observer, arithmetic=o.arithmetic)  # (N, J)
         return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
@@ -150,7 +151,7 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
                                     shat=o.shat, lut=lut, arithmetic=o.arithmetic)
 
 
-def _bare_patch(film, theta_o, alpha, quad, method, observer, o):
+def _bare_patch(film, theta_o, alpha, quad, method, observer, o, table):
     def bands(c):
         return bare_bands(film, c, observer, shat="exact" if method == "reference" else o.shat,
                           arithmetic=o.arithmetic)
@@ -160,6 +161,11 @@ def _bare_patch(film, theta_o, alpha, quad, method, observer, o):
     albedo = jnp.sum(quad.weight)
     if method == "ideal":
         return albedo * bands(jnp.cos(theta_o))
+    if method == "improved":  # the mean over the bins' cosines c̄_k
+        if table is None:
+            table = bin_table(ndf=o.ndf, dtype=albedo.dtype)
+        cb, _ = lookup_bins(table, jnp.cos(theta_o), alpha)
+        return albedo * jnp.mean(bands(cb), axis=-2)
     if method == "filtered":
         mean, cov = splitsum_light_moments(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
     else:

@@ -85,12 +85,6 @@ def _t_cdf(x, dof):
     return float(t.cdf(x, dof))
 
 
-def student_t_quantile(q, dof):
-    from scipy.stats import t
-
-    return float(t.ppf(q, dof))
-
-
 def summarise_global(rows):
     ok = [abs(r["fit"]["thickness"] - r["truth"]["thickness"]) < 1.0
           and abs(r["fit"]["eta_film"] - r["truth"]["eta_film"]) < 1e-3 for r in rows]

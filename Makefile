@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(BIN)/.thinfilm_jax-installed
 
-.PHONY: figure7 test bench setup
+.PHONY: figure7 test bench setup gpu-wheels gpu-check
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -22,3 +22,22 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/thinfilm-jax bench --out figures
+
+# The accelerator check (thinfilm_jax/studies/gpu_check.py). The device machine is offline and
+# has JAX, NumPy, SciPy, matplotlib, optimistix and pytest but not these three: `make
+# gpu-wheels` here downloads them for its Python 3.12 into .whl/ (ignored by git, ≈ 18 MB),
+# `make gpu-check` there installs them and runs the suite and the GPU table into $$OUT (or
+# figures/). CPU dry run: `make gpu-check PY=.venv/bin/python JAX_PLATFORMS=cpu
+# GPU_CHECK_ARGS=--small`.
+GPU_WHEELS := colour-science==0.4.7 openimageio==3.2.2.0 tmm==0.2.0
+GPU_CHECK_ARGS ?=
+gpu-wheels:
+	$(PY) -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 \
+	  --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 \
+	  --platform manylinux2014_x86_64 -d .whl $(GPU_WHEELS)
+
+gpu-check:
+	@if ls .whl/*.whl >/dev/null 2>&1; then $(PY) -m pip install -q --no-index --no-deps \
+	  --no-compile --no-cache-dir --upgrade --target /tmp/thinfilm_site .whl/*.whl; fi
+	PYTHONPATH=$$PWD:/tmp/thinfilm_site$${PYTHONPATH:+:$$PYTHONPATH} \
+	  $(PY) -m thinfilm_jax.studies.gpu_check $(GPU_CHECK_ARGS)

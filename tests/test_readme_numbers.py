@@ -16,6 +16,8 @@ The contract between README.md and the artifacts:
 * Numbers in running text are `Sentence` entries: a regular expression (spaces match any
   white space, so a sentence may wrap) whose groups are the checked numbers, or the words
   met / missed of a target (`Verdict`).
+* Prose that is only true of the present artifacts ("that run predates …") is a `Claim`: the
+  README must contain it exactly while its condition on the artifacts holds.
 * A number is compared at the precision the README prints it: ``9.18`` with 0.005,
   ``16,600`` with 50 (trailing zeros of a thousands-separated integer are not significant),
   ``5.7e3`` with 50, ``2.1·10⁶`` with 5·10⁴, a bare ``0`` exactly.
@@ -28,8 +30,8 @@ From the command line (run from the repository root; the package must be importa
     PYTHONPATH=. python tests/test_readme_numbers.py --fix    # rewrite README numbers
 
 ``--fix`` rewrites each mismatching number in the README's own style and precision, flips
-met / missed, and replaces verbatim tables; rows that exist on one side only, and patterns
-that no longer match, are listed for a person to edit. Run it after regenerating the
+met / missed, and replaces verbatim tables; rows that exist on one side only, patterns that
+no longer match and claims that no longer hold are listed for a person to edit. Run it after regenerating the
 benchmarks, read the diff, and check the prose around the numbers still says what they say.
 """
 
@@ -329,6 +331,24 @@ class Sentence:
         return out
 
 
+@dataclass
+class Claim:
+    """Prose that is true only while `holds()` is (e.g. "that run predates …"): the README
+    must contain `pattern` exactly when it holds; a person rewrites the prose otherwise."""
+
+    pattern: str
+    sources: tuple[str, ...]
+    holds: Callable[[], bool]
+    why: str
+
+    def check(self, text: str, tables: list[MdTable]) -> list[Mismatch]:
+        present = re.search(self.pattern.replace(" ", r"\s+"), text) is not None
+        if present != bool(self.holds()):
+            return [Mismatch(f"claim {self.pattern[:60]!r}",
+                             "present" if present else "absent", self.why)]
+        return []
+
+
 def _cite(t: MdTable, sources, anchor) -> list[Mismatch]:
     stems = {"figures/" + s.rsplit(".", 1)[0] for s in sources}
     if not any(s in t.caption for s in stems):
@@ -596,6 +616,11 @@ SPECS = [
     Sentence(r'\(`figures/improved.json` "kernels"; load average (\S+) at its start\)',
              ("improved.json",),
              lambda: [artifact("improved.json")["environment"]["load_average"][0]]),
+    Claim(r"\(`figures/ibl_bench.md`\), not in the committed run yet", ("ibl_bench.json",),
+          lambda: not any(r["name"].startswith("improved")
+                          for r in artifact("ibl_bench.json")["throughput"]),
+          "ibl_bench.json now times method='improved': quote its cost and ratio in the improved "
+          "section instead of 'not in the committed run yet'"),
     Table("| forward model | recovered within tolerance |", ("fit_study.json",), 1,
           _fit_study_rows),
     Table("| study | films | free | in the right minimum |",
@@ -629,6 +654,10 @@ SPECS = [
              r"`figures/bench.json`, "
              r"load average (\S+) at its start", ("peers.json",),
              lambda: [artifact("peers.json")["environment"]["load_average"][0]]),
+    Claim(r"That run predates the present `airy_reflectance`", ("peers.json",),
+          lambda: "predates" in (artifact("peers.json").get("note") or ""),
+          "the README says the peers run predates airy_reflectance's rewrite exactly when "
+          "peers.json's note says so; after a new run, rewrite the NumPy-target paragraph"),
     Sentence(r"(?s:`airy_reflectance` ≥ 100× `tmm`'s loop per evaluation: \*\*(met|missed)\*\* "
              r"\((\S+)–(\S+)×\))", ("peers.json",),
              lambda: [Verdict(artifact("peers.json")["targets"]["airy_vs_tmm"]["met"]),

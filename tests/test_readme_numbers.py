@@ -605,6 +605,10 @@ SPECS = [
     Verbatim("| real-time option (", ("ibl_bench.json",), _ibl_markdown),
     Sentence(r"`filtered` costs \*\*(\S+)×\*\* `ideal` per shading point", ("ibl_bench.json",),
              lambda: [_ibl_vs_ideal("filtered (LUT)")]),
+    Sentence(r"R_jk table: (\S+) points/s on this 2-core CPU for a 128 × 256 map at α ≥ 0.2",
+             ("ibl_bench.json",), lambda: [next(
+                 r["points_per_s"] for r in artifact("ibl_bench.json")["throughput"]
+                 if r["name"].startswith("reference"))]),
     Table("| ΔE₀₀ vs reference (mean / p95) |", ("improved.json",), 1, _improved_rows),
     Sentence(r"keeps the p95 at (\S+)–(\S+) against (\S+)–(\S+):", ("improved.json",),
              _improved_drakensberg),

@@ -1,4 +1,4 @@
-"""Every ```python block of README.md runs as written (issue 12 §1.9).
+"""Every ```python block of README.md runs as written.
 
 The blocks run in order in one namespace, as a reader pasting them into one session would,
 with JAX's standard dtype promotion (what users have; the suite's strict mode is a test aid).

@@ -1,9 +1,10 @@
-"""``thinfilm-jax bench``: the whole benchmark, its report and the issue-4 targets.
+"""``thinfilm-jax bench``: the whole benchmark, its report and the stated targets.
 
 `run_bench` runs the error-vs-run-time rows (`error_runtime`), the peers (`peers`), the
 specialisation costs (`specialisation`) and the stability suite (`stability`), and writes
-``bench.json``, ``error_vs_runtime.png``, ``error_vs_runtime.md``, ``specialisation.json``,
-``specialisation.md`` and ``stability_report.md``. Also ``python -m thinfilm_jax.studies.bench
+``bench.json``, ``error_vs_runtime.png``, ``error_vs_runtime.md``, ``peers.json``, ``peers.md``
+(the peers also under "peers" in ``bench.json``), ``specialisation.json``, ``specialisation.md``
+and ``stability_report.md``. Also ``python -m thinfilm_jax.studies.bench
 [--quick] [--repeats N] [--no-stability]``. Benchmarks never assert timings.
 """
 
@@ -22,7 +23,7 @@ from ._common import MATERIALS, BenchConfig
 from ._timing import environment, fmt, jsonable, log
 from .error_runtime import bench_patches, bench_shading
 from .pareto import markdown_table, pareto_rows, render_error_vs_runtime
-from .peers import bench_peers, peers_table
+from .peers import bench_peers, memory_roofline, peers_table, write_peers
 from .specialisation import run_specialisation
 from .stability import write_stability_report
 
@@ -33,7 +34,7 @@ def _find(rows, path):
 
 
 def summarise_targets(rows, peers) -> dict:
-    """Item 4 of issue 4: the cost of each specialisation and the stated targets."""
+    """The cost of each specialisation and the stated targets (README, "Targets")."""
     def per(path):
         r = _find(rows, path)
         return None if r is None or "warm_s_per_eval" not in r else r["warm_s_per_eval"]
@@ -97,6 +98,7 @@ def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None 
     rows_a, m_sweep = bench_shading(cfg, verbose)
     rows_b, ref_check, lut_table = bench_patches(cfg, verbose)
     peers = bench_peers(cfg, verbose)
+    peers["roofline"] = memory_roofline(10**7 if max(cfg.peer_sides) >= 1000 else 10**5)
     spec = run_specialisation(cfg, out, verbose) if cfg.specialisation_points else None
     rows = rows_a + rows_b
     result = {
@@ -130,6 +132,10 @@ def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None 
              f"({env['cpu_count']} CPUs, load {env['load_average'][0]:.1f} at start); "
              f"warm median of {cfg.repeats}")
     write_json(out / "bench.json", jsonable(result))
+    write_peers(peers, out, environment_=env, command="thinfilm-jax bench (run_bench)",
+                config={"name": cfg.name, "peer_sides": list(cfg.peer_sides),
+                        "tmm_calls": cfg.tmm_calls, "repeats": cfg.repeats,
+                        "extras": cfg.extras})
     render_error_vs_runtime(rows, out / "error_vs_runtime.png", title=title)
     text = report_markdown(result)
     atomic_write(out / "error_vs_runtime.md", lambda tmp: Path(tmp).write_text(text))

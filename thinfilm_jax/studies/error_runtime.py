@@ -1,4 +1,4 @@
-r"""Error against run time of every evaluation path (issue 4), the rows of `thinfilm-jax bench`.
+r"""Error against run time of every evaluation path, the rows of `thinfilm-jax bench`.
 
 For every path and knob: the error against a converged reference and the warm run time per
 evaluation (`studies.bench.run_bench` writes them to ``bench.json``, ``error_vs_runtime.png``

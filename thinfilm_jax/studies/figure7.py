@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
 import time
 from dataclasses import dataclass
 
@@ -231,6 +232,7 @@ def run_figure7(cfg: Figure7Config = Figure7Config(), out_dir="figures",
     from pathlib import Path
 
     out = Path(out_dir)
+    load = list(os.getloadavg()) if hasattr(os, "getloadavg") else None  # 1, 5, 15 min
     t0 = time.perf_counter()
     data = compute_figure7(cfg, progress=progress, devices=devices)
     elapsed = time.perf_counter() - t0
@@ -241,7 +243,8 @@ def run_figure7(cfg: Figure7Config = Figure7Config(), out_dir="figures",
         "processes": jax.process_count(),
         "x64": bool(jnp.zeros(()).dtype == jnp.float64),
         "compute_seconds": elapsed,
-        "seconds_per_method": data["seconds"],
+        "load_average": load,  # at the start: the times depend on what else ran
+        "seconds_per_method": data["seconds"],  # per row and method, first compilation included
         "errors_vs_reference": error_summary(data, cfg),
     }
     if jax.process_index() > 0:

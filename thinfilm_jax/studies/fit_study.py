@@ -166,7 +166,10 @@ def run(n, seed, out, models=tuple(MODELS), spectra=True):
     if spectra:
         summary["spectrum(airy)"] = summarise(spec_rows, spec_first)
     result = {
-        "command": "python -m thinfilm_jax.studies.fit_study " + " ".join(sys.argv[1:]),
+        # the arguments this run used (not sys.argv: `run` is also called from Python)
+        "command": (f"python -m thinfilm_jax.studies.fit_study --n {n} --seed {seed} "
+                    f"--out {out or \"''\"} --models {','.join(models)}"
+                    + ("" if spectra else " --no-spectra")),
         "seed": seed, "n": n, "noise": "Gaussian, sd = 1 % of the RMS of each film's data",
         "free": list(FREE), "tolerance": TOL,
         "patch": {"theta_o_deg": np.rad2deg(THETA_O).tolist(),

@@ -1,11 +1,20 @@
-"""Speed and agreement of `airy_reflectance` against its peers (issue 4): tmm (Byrnes'
+"""Speed and agreement of `airy_reflectance` against its peers: tmm (Byrnes'
 `coh_tmm`, a Python loop), a vectorised NumPy closed form of the same formula and
-colour-science's `thin_film_tmm`, on angle × wavelength grids."""
+colour-science's `thin_film_tmm`, on angle × wavelength grids.
+
+``python -m thinfilm_jax.studies.peers [--side 1000] [--out figures]`` and ``thinfilm-jax
+bench`` (which also embeds the result in ``bench.json`` under "peers") write
+``peers.json`` (`bench_peers` plus the machine, the targets of `peers_targets` and the copy
+bandwidth of `memory_roofline`) and ``peers.md`` (`peers_markdown`): the README's peers table
+and its targets text quote these files.
+"""
 
 from __future__ import annotations
 
+import sys
 import time
 import warnings
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -14,7 +23,8 @@ import numpy as np
 from ..airy import airy_reflectance
 from ..film import Film
 from ._common import MATERIALS, BenchConfig
-from ._timing import log, time_call, time_host
+from .._io import atomic_write, write_json
+from ._timing import environment, jsonable, log, time_call, time_host
 
 
 def numpy_airy(eta_outer, eta_film, n_base, thickness, cos_theta, wavelength, *,
@@ -174,7 +184,7 @@ def peers_table(peers) -> str:
     for key, g in peers.get("grids", {}).items():
         p, s, m = g["s_per_eval"], g["speedup_airy_vs"], g["max_abs_diff"]
         lines.append(
-            f"| {key} ({g['arithmetic']}) | {p['airy_value'] * 1e6:.3g} "
+            f"| {key} ({g.get('arithmetic', g.get('base'))}) | {p['airy_value'] * 1e6:.3g} "
             f"| {p['airy_value_and_grad'] * 1e6:.3g} | {p['numpy_closed_form'] * 1e6:.3g} "
             f"| {p['colour_thin_film_tmm'] * 1e6:.3g} | {p['tmm_coh_tmm'] * 1e6:.3g} "
             f"| {s['numpy_closed_form']:.3g} | {s['colour_thin_film_tmm']:.3g} "
@@ -184,22 +194,105 @@ def peers_table(peers) -> str:
     return "\n".join(lines)
 
 
+TARGET_VS_NUMPY = 2.0  # airy_reflectance ≥ 2× the NumPy closed form at 10⁶ (θ, λ) pairs
+TARGET_VS_TMM = 100.0  # airy_reflectance ≥ 100× tmm's Python loop per evaluation
+TARGET_N_EVAL = 10**6
+
+
+def peers_targets(peers) -> dict:
+    """The two speed targets (README, "Targets") against `bench_peers`' result: the speed-ups
+    over tmm (every grid) and over NumPy (grid and flat pairs, grids of ≥ 10⁶ pairs), their ranges
+    and whether each target is met (the smallest speed-up reaches it)."""
+    grids = peers.get("grids", {})
+    tmm = [g["speedup_airy_vs"]["tmm_coh_tmm"] for g in grids.values()]
+    big = {k: g for k, g in grids.items() if g["n_eval"] >= TARGET_N_EVAL}
+    npy = {k: {"grid": g["speedup_airy_vs"]["numpy_closed_form"],
+               "flat": g["speedup_airy_vs"]["numpy_closed_form_flat"]} for k, g in big.items()}
+    vals = [v for d in npy.values() for v in d.values()]
+    return {
+        "airy_vs_tmm": {"target": TARGET_VS_TMM, "min": min(tmm, default=None),
+                        "max": max(tmm, default=None),
+                        "met": bool(tmm) and min(tmm) >= TARGET_VS_TMM},
+        "airy_vs_numpy_1e6": {"target": TARGET_VS_NUMPY, "n_eval_at_least": TARGET_N_EVAL,
+                              "per_grid": npy, "min": min(vals, default=None),
+                              "met": (min(vals) >= TARGET_VS_NUMPY) if vals else None},
+    }
+
+
+def memory_roofline(n: int = 10**7, repeats: int = 5) -> dict:
+    """Copy bandwidth of this machine (a NumPy copy of `n` float64) and the memory floor of a
+    flat (θ, λ) pair it implies: read cos θ and λ, write R, 24 B in float64."""
+    buf = np.random.default_rng(0).random(n)
+    t = time_host(lambda: buf.copy(), repeats).warm_s
+    bandwidth = 2 * buf.nbytes / t
+    return {"copy_bandwidth_GBps": bandwidth / 1e9, "bytes_per_flat_pair_f64": 24,
+            "floor_ns_per_flat_pair_f64": 24 / bandwidth * 1e9}
+
+
+def peers_markdown(result) -> str:
+    """``peers.md``: the machine, the peers table, the targets and the roofline."""
+    env = result.get("environment", {})
+    lines = ["## airy_reflectance against its peers", ""]
+    if env:
+        lines += [f"Devices: {env.get('devices')}, {env.get('cpu_count')} CPUs, jax "
+                  f"{env.get('jax')}, load average at start {env.get('load_average')}, "
+                  f"{env.get('date')}.", ""]
+    if result.get("note"):
+        lines += [result["note"], ""]
+    lines += ["µs per (θ, λ) evaluation; ×: speed-up of airy_reflectance value.", "",
+              peers_table(result), ""]
+    t = result.get("targets") or peers_targets(result)
+    tm, tn = t["airy_vs_tmm"], t["airy_vs_numpy_1e6"]
+    if tm["min"] is not None:
+        lines.append(f"- airy ≥ {tm['target']:g}× tmm: {'met' if tm['met'] else 'missed'} "
+                     f"({tm['min']:.3g}–{tm['max']:.3g}×)")
+    per = "; ".join(f"{k}: {v['grid']:.3g}× grid, {v['flat']:.3g}× flat"
+                    for k, v in tn["per_grid"].items())
+    lines.append(f"- airy ≥ {tn['target']:g}× NumPy at ≥ {tn['n_eval_at_least']:.0e} pairs: "
+                 + (f"{'met' if tn['met'] else 'missed'} ({per})" if per
+                    else "not measured (no grid that large)"))
+    r = result.get("roofline")
+    if r:
+        lines.append(f"- copy bandwidth {r['copy_bandwidth_GBps']:.1f} GB/s: memory floor "
+                     f"{r['floor_ns_per_flat_pair_f64']:.2f} ns per flat float64 pair")
+    return "\n".join(lines) + "\n"
+
+
+def write_peers(peers, out, *, environment_=None, config=None, command=None) -> dict:
+    """Write ``out/peers.json`` and ``out/peers.md`` from `bench_peers`' result (plus the
+    machine, the run's settings and the targets); returns what was written."""
+    result = {"command": command, "environment": environment_ or environment(),
+              "config": config, **peers, "targets": peers_targets(peers)}
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "peers.json", jsonable(result))
+    text = peers_markdown(result)
+    atomic_write(out / "peers.md", lambda tmp: Path(tmp).write_text(text))
+    return result
+
+
 def main(argv=None) -> None:
     """``python -m thinfilm_jax.studies.peers``: the peers on the 10³ × 10³ grid only (≈ 1 min),
-    with the float32 option and the memory roofline of this machine."""
+    with the float32 option and the memory roofline of this machine; writes peers.json and
+    peers.md into ``--out`` (default figures)."""
     import argparse
 
     p = argparse.ArgumentParser(description=main.__doc__)
     p.add_argument("--side", type=int, default=1000)
+    p.add_argument("--out", default="figures", help="output folder ('' for none)")
     a = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
-    out = bench_peers(BenchConfig(peer_sides=(a.side,), tmm_calls=50), verbose=False)
-    buf = np.random.default_rng(0).random(10**7)
-    t = time_host(lambda: buf.copy(), 5).warm_s
-    bandwidth = 2 * buf.nbytes / t
-    print(peers_table(out))
-    print(f"copy bandwidth {bandwidth / 1e9:.1f} GB/s: a flat pair reads cos θ, λ and writes R "
-          f"(24 B in float64) -> memory floor {24 / bandwidth * 1e9:.2f} ns/pair")
+    cfg = BenchConfig(peer_sides=(a.side,), tmm_calls=50)
+    env = environment()
+    out = bench_peers(cfg, verbose=False)
+    out["roofline"] = memory_roofline(10**7 if a.side >= 1000 else 10**6)
+    command = "python -m thinfilm_jax.studies.peers " + " ".join(
+        sys.argv[1:] if argv is None else argv)
+    if a.out:
+        out = write_peers(out, a.out, environment_=env, command=command.strip(),
+                          config={"peer_sides": [a.side], "tmm_calls": cfg.tmm_calls,
+                                  "repeats": cfg.repeats})
+    print(peers_markdown(out))
     for key, g in out["grids"].items():
         p, s = g["s_per_eval"], g["speedup_airy_vs"]
         print(f"{key}: float64 {s['numpy_closed_form']:.2f}x (grid) / "

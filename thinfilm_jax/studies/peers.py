@@ -1,6 +1,17 @@
 """Speed and agreement of `airy_reflectance` against its peers (issue 4): tmm (Byrnes'
 `coh_tmm`, a Python loop), a vectorised NumPy closed form of the same formula and
-colour-science's `thin_film_tmm`, on angle × wavelength grids."""
+colour-science's `thin_film_tmm`, on angle × wavelength grids.
+
+Example (three independent implementations of one reflectance: the Figure 7 film at 34°):
+    >>> import numpy as np
+    >>> from thinfilm_jax import Film, airy_reflectance
+    >>> from thinfilm_jax.studies.peers import numpy_airy, tmm_unpolarised
+    >>> ours = float(airy_reflectance(Film(600.0, 1.3, 2.0, 0.5), np.cos(0.6), 550.0))
+    >>> ref = float(tmm_unpolarised(1.0, 1.3, 2.0 + 0.5j, 600.0, 0.6, 550.0))
+    >>> num = float(numpy_airy(1.0, 1.3, 2.0 + 0.5j, 600.0, np.cos(0.6), 550.0))
+    >>> round(ours, 6), abs(ours - ref) < 1e-13, abs(ours - num) < 1e-13
+    (0.039727, True, True)
+"""
 
 from __future__ import annotations
 

@@ -105,6 +105,14 @@ def _fit(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``thinfilm-jax`` parser; a sub-command's unset options stay None (the study's defaults
+    apply, SPEC §7).
+
+    Example:
+        >>> args = build_parser().parse_args(["figure7", "--resolution", "32"])
+        >>> args.command, args.resolution, args.out, args.thickness
+        ('figure7', 32, 'figures', None)
+    """
     from . import __version__
 
     p = argparse.ArgumentParser(prog="thinfilm-jax", description=__doc__)

@@ -11,6 +11,16 @@ from the library's data, not typed in. In both cases XYZ is scaled so the white 
 sRGB: colour.XYZ_to_sRGB with chromatic adaptation (CAT02) from the mirror white to D65 and
 the sRGB transfer function. (The 10° observer is used as if it were the 2° one for display;
 ΔE is computed in the observer's own XYZ with the mirror as white.)
+
+Example (the perfect mirror is the white: Y = 1, sRGB white, ΔE 0 to itself):
+    >>> import numpy as np
+    >>> from thinfilm_jax.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
+    >>> bands_to_xyz(np.ones(3)).round(4).tolist()  # Stiles & Burch bands → CIE 1964 XYZ
+    [0.9955, 1.0, 0.9836]
+    >>> bands_to_srgb(np.ones(3)).round(3).tolist()
+    [1.0, 1.0, 1.0]
+    >>> float(delta_e2000(np.ones(3), np.ones(3)))
+    0.0
 """
 
 from __future__ import annotations

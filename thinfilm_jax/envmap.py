@@ -9,6 +9,19 @@ Files are read with OpenImageIO (Radiance .hdr, OpenEXR .exr and anything else i
 no parser is written here. Three CC0 Poly Haven maps ship with the package (`SHIPPED`),
 downsampled by `downsample` (solid-angle-weighted box filter, which preserves the integral
 ∫ L dω of every channel exactly).
+
+Example (the texels tile the sphere, 4π sr; `downsample` keeps ∫ L dω of every channel):
+    >>> import numpy as np
+    >>> from thinfilm_jax.envmap import downsample, load_envmap, texel_solid_angles
+    >>> round(float(texel_solid_angles(8, 16).sum() / np.pi), 12)
+    4.0
+    >>> env = load_envmap(np.random.default_rng(0).uniform(size=(8, 16, 3)))
+    >>> env.shape
+    (8, 16)
+    >>> def integral(e):  # ∫ L dω per channel
+    ...     return (np.asarray(e.radiance) * texel_solid_angles(*e.shape)[..., None]).sum((0, 1))
+    >>> bool(np.allclose(integral(downsample(env, 2)), integral(env)))
+    True
 """
 
 from __future__ import annotations

@@ -6,6 +6,21 @@ $$ \int p_R R_j \approx C_0^* + \sum_{m=1}^{M} C_m^*\left[e^{im\varphi_2^*}\hat 
 with C*_m, φ₂* the BB17 terms at the mean light direction (cos θ₁*, K 22) and Ŝ the
 Gaussian-filtered sensitivity, either exact (`shat="exact"`, SPEC §5 quadrature) or from
 the LUT (`shat="lut"`, `lut.ShatLUT`). Kneiphof et al. use M = 2.
+
+Example (σ_D = 0 is the BB17 Fourier sum K 4; a spread σ_D of many wavelengths averages the
+interference out, leaving the same C₀ in every band):
+    >>> import numpy as np
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.filtered import filtered_bands
+    >>> from thinfilm_jax.opd import OPDMoments, opd_of_cos
+    >>> from thinfilm_jax.reflectance import fourier_bands
+    >>> film, c, obs = Film(600.0, 1.3, 2.0, 0.5), 0.8, "stiles_burch_1959_10"
+    >>> sharp = filtered_bands(film, c, OPDMoments(opd_of_cos(film, c), 0.0), obs)
+    >>> bool(np.allclose(sharp, fourier_bands(film, c, obs, terms=2)))
+    True
+    >>> wide = filtered_bands(film, c, OPDMoments(opd_of_cos(film, c), 1e4), obs)
+    >>> bool(np.ptp(np.asarray(wide)) < 1e-9)
+    True
 """
 
 from __future__ import annotations

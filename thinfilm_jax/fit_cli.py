@@ -243,7 +243,18 @@ def read_json(path: Path) -> dict:
 
 
 def read_observations(path) -> dict:
-    """Read a CSV (``.csv``) or JSON (``.json``) observations file (module docstring)."""
+    """Read a CSV (``.csv``) or JSON (``.json``) observations file (module docstring).
+
+    Example (patch colours at two view angles, a setting in a comment line):
+        >>> import pathlib, tempfile
+        >>> with tempfile.TemporaryDirectory() as tmp:
+        ...     path = pathlib.Path(tmp, "obs.csv")
+        ...     _ = path.write_text("# alpha = 0.25\\ntheta_o_deg,R,G,B\\n0,0.12,0.2,0.3\\n"
+        ...                         "40,0.2,0.2,0.1\\n")
+        ...     obs = read_observations(path)
+        >>> obs["kind"], obs["alpha"], obs["theta_o_deg"], obs["observed"][1]
+        ('patch', 0.25, [0.0, 40.0], [0.2, 0.2, 0.1])
+    """
     path = Path(path)
     if not path.exists():
         _fail(path, "no such file")

@@ -32,7 +32,16 @@ METHODS = ("filtered", "reference", "ideal")
 
 
 def add_parser(sub) -> None:
-    """Register ``fit-map`` on the ``thinfilm-jax`` sub-parsers."""
+    """Register ``fit-map`` on the ``thinfilm-jax`` sub-parsers.
+
+    Example (the defaults a minimal command line gets):
+        >>> from thinfilm_jax.cli import build_parser
+        >>> args = build_parser().parse_args(["fit-map", "wedge.npy", "--theta-o", "20",
+        ...                                   "--alpha", "0.2", "--eta-film", "1.33",
+        ...                                   "--eta-base", "1.0"])
+        >>> args.free, args.method, args.grid, args.func is run_fit_map_cli
+        (['thickness'], 'filtered', 201, True)
+    """
     import argparse
 
     p = sub.add_parser("fit-map", help="fit a per-pixel thickness map to an image",

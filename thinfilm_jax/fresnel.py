@@ -19,6 +19,19 @@ Two arithmetic paths, chosen statically ("a scene pays only for what it needs"):
 Singular points are guarded with the double-where pattern so that values *and*
 gradients stay finite at θ₁ = 90° (q₁ = 0), at η₂ = η₁ (no 1|2 interface) and at
 q = 0 (critical angle).
+
+Example (normal incidence: r_p = −r_s in this convention, so R_s = R_p = ((η₂ − η₁)/(η₂ + η₁))²;
+Brewster's angle tan θ₁ = η₂/η₁: r_p = 0; a base matched to the film: r₂₃ = 0):
+    >>> import numpy as np
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.fresnel import film_interfaces
+    >>> film = Film(100.0, 1.5, 1.5)
+    >>> ifc = film_interfaces(film, 1.0, arithmetic="real")
+    >>> [round(float(r), 6) for r in ifc.r12], [float(r) for r in ifc.r23]  # (s, p)
+    ([-0.2, 0.2], [0.0, 0.0])
+    >>> r12 = film_interfaces(film, np.cos(np.arctan(1.5)), arithmetic="real").r12
+    >>> round(float(r12[0]), 4), bool(abs(r12[1]) < 1e-12)
+    (-0.3846, True)
 """
 
 from __future__ import annotations

@@ -20,6 +20,24 @@ float32 (every contraction states its precision).
 
 Valid inputs: cos θ_o ∈ [0, 1]; ω_o and μ_ω in one frame (ω_o unit, |μ_ω| ≤ 1), Σ_ω
 symmetric positive semi-definite; film fields as `Film` (thickness ≥ 0 nm, η ≥ 1, κ ≥ 0).
+
+Example (an index-matched film, η₂ = η₁, is invisible: the bare 1|3 interface,
+((1.5 − 1)/(1.5 + 1))² = 0.04, in every band; K 29 with Σ_ω = 0 and μ_ω the mirror direction
+is the ideal kernel):
+    >>> import jax.numpy as jnp
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.kernels import filtered_kernel, ideal_kernel, lobe_moments
+    >>> [round(float(r), 6) for r in ideal_kernel(Film(500.0, 1.0, 1.5), 1.0)]
+    [0.04, 0.04, 0.04]
+    >>> film, t = Film(600.0, 1.3, 2.0, 0.5), 0.4
+    >>> wo = jnp.array([jnp.sin(t), 0.0, jnp.cos(t)])
+    >>> wr = jnp.array([-jnp.sin(t), 0.0, jnp.cos(t)])
+    >>> k29 = filtered_kernel(film, wo, wr, jnp.zeros((3, 3)), shat="exact")
+    >>> bool(jnp.allclose(k29, ideal_kernel(film, jnp.cos(t))))
+    True
+    >>> a, mean, cov = lobe_moments(0.0, 0.2, quadrature=(16, 16))
+    >>> bool(0.0 < a < 1.0), mean.shape, cov.shape
+    (True, (3,), (3, 3))
 """
 
 from __future__ import annotations

@@ -13,6 +13,16 @@ $$ \mu_D = 2\eta_2 d\,\mu_{\cos\theta_2},\qquad \sigma_D = 2\eta_2 d\,\sigma_{\c
 
 The ground truth (the true mean and variance of D under p_R) comes from the patch
 quadrature: `opd_moments_exact`.
+
+Example (normal incidence without spread: D = 2 η₂ d exactly and σ_D = 0; a spread of
+directions gives σ_D > 0):
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.opd import taylor_opd_moments
+    >>> m = taylor_opd_moments(Film(500.0, 1.5, 2.0), 1.0, 0.0)
+    >>> float(m.mean), float(m.std)
+    (1500.0, 0.0)
+    >>> bool(taylor_opd_moments(Film(500.0, 1.5, 2.0), 0.9, 0.01).std > 0)
+    True
 """
 
 from __future__ import annotations

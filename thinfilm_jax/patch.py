@@ -16,6 +16,20 @@ A(θ_o, α) = Σ_n w_n is the prefiltered BRDF (exact quadrature, K 12). The qua
 (`microfacet.patch_quadrature`) is deterministic and film-independent; its convergence and
 the reference's accuracy are measured in tests/test_patch.py. `patch_radiance_mc` is an
 independent Monte Carlo estimator of the reference (with its standard error).
+
+Example (16 × 16 quadrature to stay quick; d = 0 has no interference: equal bands; every band
+lies below the albedo A(θ_o, α), since 0 ≤ R ≤ 1):
+    >>> import jax.numpy as jnp
+    >>> from thinfilm_jax import Film, ModelOptions, albedo
+    >>> from thinfilm_jax.patch import patch_radiance
+    >>> opts = ModelOptions(quadrature=(16, 16))
+    >>> L = patch_radiance(Film(jnp.array([0.0, 600.0]), 1.3, 2.0, 0.5), 0.3, 0.25, options=opts)
+    >>> L.shape
+    (2, 3)
+    >>> bool(jnp.ptp(L[0]) < 1e-12)
+    True
+    >>> bool(jnp.all((L > 0) & (L < albedo(0.3, 0.25, quadrature=(16, 16)))))
+    True
 """
 
 from __future__ import annotations

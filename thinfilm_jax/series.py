@@ -14,6 +14,17 @@ The series equals §2 when the 1|2 interface transmits (η₁ ≤ η₂ sin-wise
 internal reflection at 1|2 (η₁ > η₂, grazing) T₁₂₁ = 0 and the series gives R = 1, while
 the exact Airy sum keeps frustrated transmission through very thin films: a documented
 limitation of the series (SPEC §3).
+
+Example (the series converges to the exact Airy reflectance; M = 0 leaves C₀):
+    >>> from thinfilm_jax import Film, airy_reflectance
+    >>> from thinfilm_jax.series import series_reflectance, series_terms
+    >>> film = Film(600.0, 1.3, 2.0, 0.5)
+    >>> st = series_terms(film, 0.8)
+    >>> r = series_reflectance(st, 550.0, 60).mean(axis=0)  # (R_s + R_p)/2
+    >>> bool(abs(r - airy_reflectance(film, 0.8, 550.0)) < 1e-12)
+    True
+    >>> bool(abs(series_reflectance(st, 550.0, 0) - st.c0).max() == 0)
+    True
 """
 
 from __future__ import annotations

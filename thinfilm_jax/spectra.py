@@ -18,6 +18,17 @@ A cheaper closed form (BB17's Gaussian fit) represents each band as a sum of Gau
 frequency ν = 1/λ; its Fourier transform and filtered transform are then analytic
 (`gaussian_fit`, `sensitivity_ft(..., shat="gaussian")`). Its error against the
 tabulated Ŝ is measured by `gaussian_fit_error` and stated in the README.
+
+Example (unit-area bands: Ŝ_j(0) = 1; a Gaussian spread of the path over many wavelengths
+averages Ŝ out):
+    >>> import numpy as np
+    >>> from thinfilm_jax.spectra import get_observer, sensitivity_ft
+    >>> get_observer("stiles_burch_1959_10").band_names
+    ('R', 'G', 'B')
+    >>> bool(np.abs(sensitivity_ft(0.0) - 1.0).max() < 1e-12)
+    True
+    >>> bool(np.abs(sensitivity_ft(1000.0, sigma2=1000.0**2)).max() < 1e-12)
+    True
 """
 
 from __future__ import annotations

@@ -101,7 +101,17 @@ def jitted_patch(method="reference", observer=SB, **knobs):
 
 def subsampled_observer(observer: str, step: int):
     """(λ, W) of `observer` on every `step`-th tabulated sample, trapezoid weights on the
-    kept nodes, each band renormalised to unit area (step 1 is the library's quadrature)."""
+    kept nodes, each band renormalised to unit area (step 1 is the library's quadrature).
+
+    Example:
+        >>> import numpy as np
+        >>> lam, w = subsampled_observer("stiles_burch_1959_10", 1)
+        >>> bool(np.allclose(w, get_observer("stiles_burch_1959_10").weights))
+        True
+        >>> lam, w = subsampled_observer("stiles_burch_1959_10", 2)
+        >>> lam.shape, [round(float(s), 12) for s in w.sum(axis=0)]
+        ((45,), [1.0, 1.0, 1.0])
+    """
     obs = get_observer(observer)
     s = obs.weights / trapezoid_weights(obs.wavelengths)[:, None]  # ∝ S_j(λ_k)
     lam = obs.wavelengths[::step]

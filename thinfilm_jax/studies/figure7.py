@@ -11,6 +11,13 @@ Display: band values → XYZ (mirror white, Y = 1) → sRGB through colour-scien
 exposure for all panels (`exposure`, default 2.0, in the title). Errors: CIEDE2000 ΔE of each
 approximation against the reference, per pixel, with mean / 95th percentile / max per method
 and per row.
+
+Example (the grids of a 4 × 4 panel: cell centres in θ_o and √α, d with both ends):
+    >>> import numpy as np
+    >>> from thinfilm_jax.studies.figure7 import Figure7Config, grids
+    >>> theta, sqrt_alpha, thickness = grids(Figure7Config(resolution=4))
+    >>> np.degrees(theta).tolist(), sqrt_alpha.tolist(), thickness[[0, -1]].tolist()
+    ([11.25, 33.75, 56.25, 78.75], [0.125, 0.375, 0.625, 0.875], [0.0, 1000.0])
 """
 
 from __future__ import annotations

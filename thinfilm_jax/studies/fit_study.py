@@ -65,6 +65,17 @@ def noisy(clean, rng):
 
 
 def initial_guess(p, rng):
+    """The start of a fit: the true film with η₂ = 1.5 and a thickness 250–400 nm off the
+    truth, inside (0, 2000) nm.
+
+    Example:
+        >>> import numpy as np
+        >>> rng = np.random.default_rng(0)
+        >>> films = random_films(20, rng)
+        >>> off = [abs(float(initial_guess(p, rng).thickness) - p["thickness"]) for p in films]
+        >>> bool(250.0 <= min(off) and max(off) <= 400.0)
+        True
+    """
     offset = rng.uniform(250, 400) * rng.choice([-1.0, 1.0])
     d0 = p["thickness"] + offset
     if not 0 < d0 < 2000:

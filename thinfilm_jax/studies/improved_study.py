@@ -70,7 +70,14 @@ class StudyConfig:
 
 
 def regions(theta_o, alpha):
-    """Boolean masks of the named regions (grazing, rough, near-mirror, interior)."""
+    """Boolean masks of the named regions (grazing, rough, near-mirror, interior).
+
+    Example (interior is what no other region holds):
+        >>> import numpy as np
+        >>> masks = regions(np.radians([10.0, 80.0, 30.0]), np.array([0.2, 0.2, 0.6]))
+        >>> masks["grazing θo ≥ 75°"].tolist(), masks["interior"].tolist()
+        ([False, True, False], [True, False, False])
+    """
     deg = np.degrees(theta_o)
     g, r, m = deg >= 75.0, alpha >= 0.5, alpha <= 0.06
     return {"all": np.ones_like(g), "grazing θo ≥ 75°": g, "rough α ≥ 0.5": r,

@@ -30,7 +30,12 @@ def markdown_table(rows) -> str:
 
 
 def pareto_front(times, errors):
-    """Indices of the non-dominated points (smaller time and smaller error), by time."""
+    """Indices of the non-dominated points (smaller time and smaller error), by time.
+
+    Example (point 1 is slower and worse than point 0: dominated):
+        >>> pareto_front([1.0, 2.0, 3.0], [1.0, 2.0, 0.5])
+        [0, 2]
+    """
     order = np.argsort(times, kind="stable")
     front, best = [], math.inf
     for i in order:

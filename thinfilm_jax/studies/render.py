@@ -15,6 +15,16 @@ float32 frame timings are in the benchmark). Display: exposure × radiance, conv
 bands → XYZ → sRGB (colour-science), clipped; the exposure maps the reference's 99th
 luminance percentile to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled
 values against the reference (mirror white Y = 1), mean and p95 per panel.
+
+Example (unit normals over the frame; the thickness texture stays in [250, 850] nm):
+    >>> import numpy as np
+    >>> from thinfilm_jax.studies.render import camera, sphere, thickness_field
+    >>> mask, n = sphere(16, *camera(0.3, 15.0))
+    >>> mask.shape, n.shape, bool(np.allclose(np.linalg.norm(n, axis=-1), 1.0))
+    ((16, 16), (16, 16, 3), True)
+    >>> d = thickness_field(n)
+    >>> bool(250.0 <= d.min() and d.max() <= 850.0)
+    True
 """
 
 from __future__ import annotations

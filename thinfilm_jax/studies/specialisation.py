@@ -55,7 +55,13 @@ N_REFERENCE = 4000  # points scored against the float64 spectral reference
 
 
 def band_subset(observer: str, j: int) -> Observer:
-    """`observer` reduced to its band `j` (an `Observer` the kernels accept by value)."""
+    """`observer` reduced to its band `j` (an `Observer` the kernels accept by value).
+
+    Example (the G band alone, still of unit area):
+        >>> obs = band_subset("stiles_burch_1959_10", 1)
+        >>> obs.name, obs.n_bands, round(float(obs.weights.sum()), 12)
+        ('stiles_burch_1959_10[G]', 1, 1.0)
+    """
     obs = get_observer(observer)
     return Observer(f"{obs.name}[{obs.band_names[j]}]", obs.wavelengths,
                     obs.weights[:, j:j + 1], obs.areas[j:j + 1], (obs.band_names[j],))

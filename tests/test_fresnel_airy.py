@@ -26,9 +26,9 @@ N_TMM = 1200  # random cases compared with tmm (SPEC §2 asks ≥ 1000)
 TMM_ATOL = 5e-13
 TMM_ATOL_DIELECTRIC = 1e-13
 # Exact limits. Measured max |Δ|: η₂ = η₁ at d ≤ 20 µm vs the bare interface 1.1e-13 (the
-# Airy sum through a film of phase up to ~700 rad), asserted at 2e-13 (SAME_ETA_ATOL); every other limit (d = 0, R_s = R_p at normal
-# incidence, dielectric path = general path, AR coating, Brewster r_p) ≤ 1.0e-15 (rounding),
-# asserted at 1e-14 (LIMIT_ATOL).
+# Airy sum through a film of phase up to ~700 rad), asserted at 2e-13 (SAME_ETA_ATOL); every
+# other limit (d = 0, R_s = R_p at normal incidence, dielectric path = general path, AR
+# coating, Brewster r_p) ≤ 1.0e-15 (rounding), asserted at 1e-14 (LIMIT_ATOL).
 LIMIT_ATOL = 1e-14
 SAME_ETA_ATOL = 2e-13
 # Rounding slack for R ≤ 1: under TIR at 2|3 (|r₂₃| = 1) R = 1 exactly in theory; the computed

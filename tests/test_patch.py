@@ -158,8 +158,8 @@ def test_gradients_finite_every_method(method):
 
 def test_float32_reference_close_to_float64():
     """Real-time dtype: float32 within 1e-6 of float64 per band (measured max over the grid,
-    θ_o ∈ [0°, 88.8°], α ∈ {0.05, 0.25, 0.6}: reference 4.6e-7, filtered_gt_moments 4.9e-7, ideal 3.6e-7;
-    2× margin)."""
+    θ_o ∈ [0°, 88.8°], α ∈ {0.05, 0.25, 0.6}: reference 4.6e-7, filtered_gt_moments
+    4.9e-7, ideal 3.6e-7; 2× margin)."""
     f32 = FIG7.astype(jnp.float32)
     t = jnp.asarray(T[:, 1:4], jnp.float32)
     a = jnp.asarray(A[:, 1:4], jnp.float32)

@@ -20,8 +20,17 @@ import thinfilm_jax as tf
 from thinfilm_jax import airy, fresnel
 
 N_TMM = 1200  # random cases compared with tmm (SPEC §2 asks ≥ 1000)
-TMM_ATOL = 1e-10  # SPEC §2: agreement with tmm in float64
-LIMIT_ATOL = 1e-12  # exact limits (d = 0, η₂ = η₁, normal incidence, AR coating, Brewster)
+# Agreement with tmm in float64 (SPEC §2 asks ≤ 1e-10). Measured max |ΔR| over the 1,200 cases
+# of test_airy_matches_tmm_random: 3.9e-13 (general path); over the 300 dielectric cases of
+# test_airy_matches_tmm_dielectric_path: 6.0e-14. Asserted with a 1.3× and 1.7× margin.
+TMM_ATOL = 5e-13
+TMM_ATOL_DIELECTRIC = 1e-13
+# Exact limits. Measured max |Δ|: η₂ = η₁ at d ≤ 20 µm vs the bare interface 1.1e-13 (the
+# Airy sum through a film of phase up to ~700 rad), asserted at 2e-13 (SAME_ETA_ATOL); every
+# other limit (d = 0, R_s = R_p at normal incidence, dielectric path = general path, AR
+# coating, Brewster r_p) ≤ 1.0e-15 (rounding), asserted at 1e-14 (LIMIT_ATOL).
+LIMIT_ATOL = 1e-14
+SAME_ETA_ATOL = 2e-13
 # Rounding slack for R ≤ 1: under TIR at 2|3 (|r₂₃| = 1) R = 1 exactly in theory; the computed
 # ratio |r₁₂ + r₂₃e^{iδ}|²/|1 + r₁₂r₂₃e^{iδ}|² carries a relative rounding error amplified by
 # ~(1+|r₁₂|)/(1−|r₁₂|) (≈ 100 near grazing). Measured max overshoot: 5.8e-15.
@@ -87,7 +96,7 @@ def test_airy_matches_tmm_random():
     print(f"\nAiry vs tmm: max |ΔR| = {err.max():.3e} over {N_TMM} cases "
           f"({tir.sum()} beyond the 1|2 critical angle, {absorbing.sum()} absorbing)")
     assert tir.sum() >= 100 and absorbing.sum() >= 400 and (eta_outer == 1.33).sum() >= 250
-    assert err.max() <= TMM_ATOL, np.argmax(err)
+    assert err.max() <= TMM_ATOL, (err.max(), np.argmax(err))
     # sanity: the comparison is not vacuous (R spans the whole range)
     assert ref.min() < 0.01 and ref.max() > 0.99
 
@@ -103,7 +112,7 @@ def test_airy_matches_tmm_dielectric_path():
     ours = np.asarray(tf.airy_reflectance(film, np.cos(theta), lam, arithmetic="real"))
     ref = np.array([tmm_unpolarised(1.0, eta_film[i], eta_base[i], 0.0, d[i], theta[i], lam[i])
                     for i in range(n)])
-    assert np.abs(ours - ref).max() <= TMM_ATOL
+    assert np.abs(ours - ref).max() <= TMM_ATOL_DIELECTRIC, np.abs(ours - ref).max()
 
 
 # ------------------------------------------------------------------------------ limits
@@ -122,8 +131,8 @@ def test_no_film_gives_bare_interface(eta_outer):
     c = np.cos(theta)
     zero_d = tf.Film(np.zeros(n), rng.uniform(1.0, 3.0, n), eta_base, kappa, eta_outer)
     same_eta = tf.Film(rng.uniform(0, 20000, n), np.full(n, eta_outer), eta_base, kappa, eta_outer)
-    for film in (zero_d, same_eta):
-        np.testing.assert_allclose(tf.airy_reflectance(film, c, lam), ref, rtol=0, atol=LIMIT_ATOL)
+    for film, atol in ((zero_d, LIMIT_ATOL), (same_eta, SAME_ETA_ATOL)):
+        np.testing.assert_allclose(tf.airy_reflectance(film, c, lam), ref, rtol=0, atol=atol)
     # same on the dielectric path where it applies (κ = 0, η₃ ≥ η₁)
     ok = (kappa == 0) & (eta_base >= eta_outer)
     film = tf.Film(0.0, 1.7, eta_base[ok], 0.0, eta_outer)

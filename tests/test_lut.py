@@ -9,22 +9,28 @@ from thinfilm_jax.lut import alias_free_path, build_shat_lut, lookup, lut_max_er
 from thinfilm_jax.spectra import sensitivity_ft
 
 OBS = ["stiles_burch_1959_10", "cie_1931_2"]
-# Stated LUT accuracy at the default resolution (Δμ = 25 nm, 128 σ samples): |LUT − exact|.
+# LUT accuracy at the default resolution (Δμ = 25 nm, 128 σ samples): max |LUT − exact| over
+# lut_max_error's 4000 random (μ, σ) inside the table, measured 2.9e-5 (S&B 10°) and 2.5e-5
+# (CIE 1931); asserted with a ~1.1× / 1.2× margin (LUT_MAX_ERR). LUT_ATOL is the looser
+# per-point tolerance the other tests of this file use.
+LUT_MAX_ERR = {"stiles_burch_1959_10": 3.2e-5, "cie_1931_2": 3.0e-5}
 LUT_ATOL = 5e-5
 
 
 @pytest.mark.parametrize("observer", OBS)
 def test_lut_matches_exact_inside_range(observer):
     err = lut_max_error(observer, n=4000)
-    assert err < LUT_ATOL, err
+    assert err < LUT_MAX_ERR[observer], err
 
 
 @pytest.mark.parametrize("observer", OBS)
 def test_lut_convergence_order(observer):
-    """Catmull–Rom is third order: halving both steps divides the error by ≥ 6."""
+    """Catmull–Rom is third order: halving both steps divides the error by 8 asymptotically
+    (measured ÷8.5 S&B, ÷8.8 CIE at Δμ = 50 → 25 nm, 64 → 128 σ samples); asserted ≥ 7.5
+    (a second-order interpolant would give ÷4)."""
     e1 = lut_max_error(observer, n=3000, d_mu=50.0, n_sigma=64)
     e2 = lut_max_error(observer, n=3000, d_mu=25.0, n_sigma=128)
-    assert e2 < e1 / 6, (e1, e2)
+    assert e2 < e1 / 7.5, (e1, e2, e1 / e2)
 
 
 def test_sigma_zero_is_unfiltered_transform():

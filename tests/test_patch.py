@@ -18,36 +18,48 @@ THETA = np.array([0.0, 0.4, 0.9, 1.2, 1.45, 1.55])
 ALPHA = np.array([1e-3, 0.05, 0.25, 0.6, 1.0])
 T, A = np.meshgrid(THETA, ALPHA, indexing="ij")
 
-# The reference's absolute accuracy per band, shown by test_reference_converges (48 vs 128).
-REFERENCE_ATOL = 1e-4
+# The reference's absolute accuracy per band at the default order 48, shown by
+# test_reference_converges: 2.0e-8 on this grid (worst at θ_o = 88.8°, α = 1e-3).
+REFERENCE_ATOL = 1e-4  # what the other tests may assume; the measured error is far below
+# Max error per band over the grid T × A at n = 16, 24, 32, 48 against n = 96 (measured:
+# 3.8e-5, 2.1e-6, 4.1e-7, 2.0e-8; n = 96 is itself within 8e-11 of n = 128, so it measures
+# the n = 48 error to 0.4 %). Asserted with a 1.3–1.5× margin.
+CONVERGENCE_ORDERS = (16, 24, 32, 48)
+CONVERGENCE_MAX = (5e-5, 3e-6, 6e-7, 3e-8)
+CONVERGENCE_TRUTH = 96
 
 
 @pytest.fixture(scope="module")
 def ref_converged():
-    return np.asarray(patch_radiance(FIG7, T, A, options=ModelOptions(quadrature=(128, 128))))
+    q = (CONVERGENCE_TRUTH, CONVERGENCE_TRUTH)
+    return np.asarray(patch_radiance(FIG7, T, A, options=ModelOptions(quadrature=q)))
 
 
 def test_reference_converges(ref_converged):
-    """Error vs quadrature order: fast (spectral) decay; the default order 48 meets 1e-4."""
-    orders = [8, 16, 24, 32, 48]
+    """Error vs quadrature order over θ_o ∈ [0°, 88.8°], α ∈ [1e-3, 1]: fast (spectral)
+    decay, each order within its stated bound (CONVERGENCE_MAX)."""
     errs = [float(np.abs(np.asarray(patch_radiance(FIG7, T, A,
                                                    options=ModelOptions(quadrature=(n, n))))
-                         - ref_converged).max()) for n in orders]
-    # Measured (128 as truth): 1.7e-3, 6e-5, 6e-6, 8e-7, 4e-8 — geometric decay, ≈ x0.1 per +8.
+                         - ref_converged).max()) for n in CONVERGENCE_ORDERS]
+    print("\npatch reference max error vs n = 96:", ", ".join(f"{e:.2e}" for e in errs))
+    assert all(e <= b for e, b in zip(errs, CONVERGENCE_MAX)), errs
     assert all(b < a for a, b in zip(errs, errs[1:])), errs
-    assert errs[-1] < REFERENCE_ATOL / 10, errs
-    assert errs[3] < REFERENCE_ATOL, errs
-    # geometric rate: log-error vs n has slope below log(0.5) per node
-    slope = np.polyfit(orders, np.log(errs), 1)[0]
-    assert slope < np.log(0.5) / 4, (slope, errs)
+    # geometric rate: log-error vs n has slope −0.24 per node (×0.15 per +8 nodes); assert
+    # below −0.2 (an algebraic O(n⁻²) error would give ≈ −0.04 over this range)
+    slope = np.polyfit(CONVERGENCE_ORDERS, np.log(errs), 1)[0]
+    assert slope < -0.2, (slope, errs)
 
 
 @pytest.mark.parametrize("theta_o,alpha", [(0.3, 0.05), (1.2, 0.25), (1.45, 0.8)])
 def test_reference_matches_monte_carlo(theta_o, alpha):
-    """An independent Monte Carlo estimator (full azimuth, NDF sampling) agrees within 4 SE."""
+    """An independent Monte Carlo estimator (full azimuth, NDF sampling) agrees within 4 SE.
+
+    Measured SE per band 1.5e-5 – 2.8e-4 over the three cases (|z| ≤ 2.2); SE < 3e-4 is
+    asserted too, so 4 SE < 1.2e-3 is what the agreement means."""
     mean, se = patch_radiance_mc(FIG7, theta_o, alpha, jax.random.PRNGKey(1),
                                  n_samples=200_000)
     ref = np.asarray(patch_radiance(FIG7, theta_o, alpha))
+    assert np.all(np.asarray(se) < 3e-4), se
     assert np.all(np.abs(np.asarray(mean) - ref) < 4 * np.asarray(se) + 1e-12), (mean, se, ref)
 
 
@@ -62,11 +74,15 @@ def test_radiance_bounded_by_albedo():
 
 
 def test_reference_without_film_is_bare_interface():
-    """d = 0 removes the film: the patch reflects like the bare base (reference vs direct)."""
-    film = Film(0.0, 1.3, 2.0, 0.5)
-    bare = Film(0.0, 1.0, 2.0, 0.5)
-    np.testing.assert_allclose(patch_radiance(film, T, A), patch_radiance(bare, T, A),
-                               atol=1e-13)
+    """d = 0 removes the film: the film machinery (Airy sum through η₂ = 1.3, forced with
+    ``layer="film"``) reflects like the bare outer|base interface (``layer="auto"`` picks the
+    bare path for d = 0) over the whole grid, grazing views and α = 1e-3 included.
+    Measured max |Δ| = 1.4e-15 (rounding, values up to 0.89); asserted at 1e-14."""
+    f0 = Film(0.0, 1.3, 2.0, 0.5)
+    film = np.asarray(patch_radiance(f0, T, A, options=ModelOptions(layer="film")))
+    bare = np.asarray(patch_radiance(f0, T, A))
+    assert np.abs(film - bare).max() <= 1e-14, np.abs(film - bare).max()
+    assert bare.max() > 0.5  # not a vacuous comparison of near-zero radiances
 
 
 def test_mirror_limit_all_methods_agree():
@@ -106,9 +122,9 @@ def test_filtered_beats_ideal_on_rough_half():
 def test_taylor_chain_matches_true_opd_moments():
     """K 20–28 against the true mean/std of D under p_R at moderate angles (θ_o ≤ 60°).
 
-    Stated tolerances: |Δμ_D| ≤ 0.5 % of μ_D, and σ_D within 25 % (first-order Taylor and
-    the projection through ⟨ω_i, ω_o⟩ neglect the curvature of cos θ₂, largest for rough
-    surfaces)."""
+    Measured over these 9 cases: |Δμ_D| ≤ 0.46 % of μ_D, σ_D within 4.0 % (first-order Taylor
+    and the projection through ⟨ω_i, ω_o⟩ neglect the curvature of cos θ₂, largest for rough
+    surfaces). Asserted: 0.5 % and 5 %."""
     rows = []
     for theta_o in (0.2, 0.6, 1.0):
         for alpha in (0.05, 0.25, 0.5):
@@ -121,7 +137,7 @@ def test_taylor_chain_matches_true_opd_moments():
             rows.append((float(tay.mean), float(ex.mean), float(tay.std), float(ex.std)))
     r = np.array(rows)
     np.testing.assert_allclose(r[:, 0], r[:, 1], rtol=5e-3)
-    np.testing.assert_allclose(r[:, 2], r[:, 3], rtol=0.25)
+    np.testing.assert_allclose(r[:, 2], r[:, 3], rtol=0.05)
     assert np.all(r[:, 3] > 0)
 
 
@@ -141,7 +157,9 @@ def test_gradients_finite_every_method(method):
 
 
 def test_float32_reference_close_to_float64():
-    """Real-time dtype: the reference in float32 is within 2e-5 of float64 per band."""
+    """Real-time dtype: float32 within 1e-6 of float64 per band (measured max over the grid,
+    θ_o ∈ [0°, 88.8°], α ∈ {0.05, 0.25, 0.6}: reference 4.6e-7, filtered_gt_moments
+    4.9e-7, ideal 3.6e-7; 2× margin)."""
     f32 = FIG7.astype(jnp.float32)
     t = jnp.asarray(T[:, 1:4], jnp.float32)
     a = jnp.asarray(A[:, 1:4], jnp.float32)
@@ -151,7 +169,7 @@ def test_float32_reference_close_to_float64():
         v64 = np.asarray(patch_radiance(FIG7, T[:, 1:4], A[:, 1:4], method=m,
                                         options=ModelOptions(quadrature=(24, 24))))
         assert v32.dtype == np.float32
-        np.testing.assert_allclose(v32, v64, atol=2e-5, err_msg=m)
+        np.testing.assert_allclose(v32, v64, rtol=0, atol=1e-6, err_msg=m)
 
 
 def test_vmap_jit_and_broadcasting():
@@ -189,8 +207,10 @@ def test_bad_method_and_film():
 
 def test_bare_layer_specialisation_is_the_bare_interface():
     """d = 0 concretely: `layer="auto"` takes the bare-interface path, which is the Fresnel
-    formula of the outer|base interface (NumPy, independent) for every band, equals the film
-    path for the reference (rounding) and is the M → ∞ limit of the real-time ones."""
+    formula of the outer|base interface (NumPy, independent) for every band and the M → ∞
+    limit of the real-time methods' film path. (Reference film path = bare path over the
+    whole grid: test_reference_without_film_is_bare_interface; not repeated here, two
+    compilations fewer.)"""
     f0 = Film(0.0, 1.3, 2.0, 0.5)
     c = np.linspace(0.0, 1.0, 9)
     n3 = 2.0 + 0.5j
@@ -202,12 +222,13 @@ def test_bare_layer_specialisation_is_the_bare_interface():
         got = np.asarray(tf.rgb_reflectance(f0, c, method=method))
         np.testing.assert_allclose(got, want[:, None] * np.ones(3), rtol=1e-12, atol=1e-15)
     q = ModelOptions(quadrature=(16, 16))
-    for m in ("reference", "ideal", "filtered_gt_moments", "filtered", "improved"):
+    for m in ("ideal", "filtered_gt_moments", "filtered", "improved"):
         bare = np.asarray(patch_radiance(f0, 0.9, 0.3, method=m, options=q))
         film = np.asarray(patch_radiance(f0, 0.9, 0.3, method=m,
                                          options=q._replace(layer="film")))
-        tol = 1e-13 if m == "reference" else 1e-3  # real time: M = 2 truncation at d = 0
-        assert np.abs(bare - film).max() <= tol, (m, bare, film)
+        # real time: M = 2 truncation at d = 0 (a bound, not a measurement: the film path's
+        # own accuracy is pinned elsewhere; here the bare path must be its M → ∞ limit)
+        assert np.abs(bare - film).max() <= 1e-3, (m, bare, film)
     with pytest.raises(ValueError, match="layer='bare'"):
         tf.rgb_reflectance(Film(1.0, 1.3, 2.0, 0.5), c, layer="bare")
     with pytest.raises(ValueError, match="layer"):

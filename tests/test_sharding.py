@@ -25,7 +25,10 @@ import thinfilm_jax as tf
 from thinfilm_jax.sharding import batch_mesh, map_sharded, shard_batch, to_host
 
 #: A sharded evaluation runs the same program on smaller blocks; XLA's per-block code may
-#: round differently in the last place (measured: 0 ulp everywhere).
+#: round differently in the last place, so ≤ 1 ulp is asserted (measured: 0 ulp in every
+#: case: bit-identical here). The patch reference is checked in float64 only: a float32
+#: patch case doubles the patch part of the 4-device child (two more compilations) and
+#: pushed it past its 180 s timeout on the shared 2-core machine.
 MAX_ULP = 1
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

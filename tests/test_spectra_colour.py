@@ -21,7 +21,12 @@ from thinfilm_jax.spectra import get_observer, sensitivity_ft
 OBSERVER_NAMES = ("stiles_burch_1959_10", "cie_1931_2")
 GH_NODES = 80  # Gauss–Hermite nodes for E[Ŝ(x)], x ~ N(μ, σ²), σ ≤ 300 nm
 FILTER_ATOL = 1e-10  # closed-form filtered Ŝ vs Gauss–Hermite average
-GAUSS_FIT_MAX = 0.03  # Gaussian-fit Ŝ vs tabulated over x ∈ [0, 8000] nm (measured 0.008–0.023)
+# Gaussian-fit Ŝ (3 Gaussians per band) vs tabulated, max |Δ| over x ∈ [0, 8000] nm per band,
+# measured (spectra.gaussian_fit_error): S&B 10° 0.0109 / 0.0133 / 0.0084, CIE 1931
+# 0.0099 / 0.0157 / 0.0227. Asserted per band with a 1.05× margin (the fit is an
+# optimisation run at first use; a fit 5 % worse in any band fails).
+GAUSS_FIT_MAX = {"stiles_burch_1959_10": np.array([0.0114, 0.0140, 0.0088]),
+                 "cie_1931_2": np.array([0.0104, 0.0165, 0.0238])}
 XYZ_ATOL = 1e-10
 
 
@@ -90,12 +95,14 @@ def test_gaussian_fit_error_bound(observer):
     print(f"\nGaussian-fit max |Ŝ_fit − Ŝ_tab| over x ∈ [0, 8000] nm, {observer}: "
           + ", ".join(f"{e:.4f}" for e in err))
     assert err.shape == (3,)
-    assert np.all(err <= GAUSS_FIT_MAX)
-    # independent re-evaluation of the same quantity on other x samples
+    assert np.all(err <= GAUSS_FIT_MAX[observer]), err
+    # independent re-evaluation of the same quantity on other x samples (measured: equal to
+    # `err` within 3e-6, so the bound holds there too and `err` is not an under-estimate)
     x = np.random.default_rng(52).uniform(0.0, 8000.0, 500)
     diff = np.abs(np.asarray(sensitivity_ft(x, observer, shat="gaussian"))
                   - np.asarray(sensitivity_ft(x, observer)))
-    assert np.all(diff.max(axis=0) <= err + 1e-3)
+    assert np.all(diff.max(axis=0) <= GAUSS_FIT_MAX[observer]), diff.max(axis=0)
+    assert np.all(diff.max(axis=0) <= err + 1e-5)
     assert diff.max() > 1e-4  # it is an approximation, not the table itself
 
 
@@ -110,7 +117,8 @@ CIE_RGB10_TO_XYZ10 = np.array([[0.341080, 0.189145, 0.387529],
 # S&B 1959 table to its CIE 1964 10° table leaves a relative RMS of 1.09 %, 0.96 %, 2.35 %
 # (x̄, ȳ, z̄); the CIE matrix gives 1.18 %, 1.04 %, 2.87 % (the 1964 functions are not an exact
 # linear image of the S&B 1959 table: Speranskaya's data and smoothing went into them).
-CMF_REL_RMS_MAX = np.array([0.015, 0.015, 0.032])
+# Asserted with a 1.1× margin on the CIE matrix's measured 1.18 / 1.04 / 2.87 %.
+CMF_REL_RMS_MAX = np.array([0.013, 0.0115, 0.0316])
 
 
 def test_band_to_xyz_matrix_is_the_cie_matrix():

@@ -7,7 +7,7 @@ integrator. Conventions (docs/SPEC.md): nm, radians, GGX α, colour bands of uni
 The public face is this file; modules hold one concept each:
 `fresnel` (interface amplitudes), `airy` (exact R), `series` (BB17 terms), `spectra`
 (observers, Ŝ), `reflectance` (band R_j), `lut` (Ŝ(μ,σ²) table), `opd` (D distribution),
-`filtered` (K 29), `improved` (this library's improved real-time model, issue 11: K 29
+`filtered` (K 29), `improved` (this library's improved real-time model, docs/improved.md: K 29
 per equal-probability bin of cos θ₁, `method="improved"`), `microfacet` (GGX/Smith, patch
 quadrature), `patch` (SPEC §7 methods),
 `colorimetry` (XYZ/sRGB/ΔE), `fit` (optimistix fits), `cli`. Studies and benchmarks

@@ -153,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="core: error vs run time, peers, specialisation (default); ibl: the "
                         "2560×1440 IBL frame and the real-time options' errors; scaling: the "
                         "large jobs on 1, 2 and 4 devices (subprocesses); improved: "
-                        "method='improved' against filtered (issue 11: regions, IBL renders, "
+                        "method='improved' against filtered (regions, IBL renders, "
                         "kernel cost, Pareto); all: the four")
     b.set_defaults(func=_bench)
 

@@ -1,4 +1,4 @@
-r"""Thickness maps: per-pixel fits of film thickness (optionally η₂) to an image (issue #13 §3).
+r"""Thickness maps: per-pixel fits of film thickness (optionally η₂) to an image.
 
 An image of a film under known light is, pixel by pixel, one `fit_film` problem with a
 single view: the band radiances L_j (J = 3 numbers) of pixel p at its known view angle

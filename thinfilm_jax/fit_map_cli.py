@@ -1,5 +1,5 @@
 """``thinfilm-jax fit-map IMAGE ...``: a thickness map (optionally η₂) from an image
-(`thinfilm_jax.fit_map.fit_patch_map`, issue #13 §3).
+(`thinfilm_jax.fit_map.fit_patch_map`).
 
 IMAGE holds the linear band radiances (H, W, J) of a film under uniform light, as
 `patch_radiance` / `render_patch_map` give them (Stiles–Burch RGB bands by default; X, Y, Z

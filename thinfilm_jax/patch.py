@@ -10,7 +10,7 @@ $$ L_j(\theta_o, \alpha) = \int \tilde\rho(\omega_i, \omega_o)\langle n, \omega_
 | ``filtered_gt_moments`` | A · K 29 with μ_D, σ_D from the true μ_ω, Σ_ω via K 20–28      |
 | ``filtered_gt_opd``   | A · K 29 with the true mean and std of D under p_R               |
 | ``filtered``          | A · K 29 with μ_ω, Σ_ω of the split-sum prefiltered uniform environment |
-| ``improved``          | A · K 29 per equal-probability bin of cos θ₁ (`improved`, issue 11) |
+| ``improved``          | A · K 29 per equal-probability bin of cos θ₁ (`improved`, docs/improved.md) |
 
 A(θ_o, α) = Σ_n w_n is the prefiltered BRDF (exact quadrature, K 12). The quadrature
 (`microfacet.patch_quadrature`) is deterministic and film-independent; its convergence and

@@ -5,7 +5,7 @@ import it lazily. One concern per module:
 
 * `figure7` — Figure 7 of Kneiphof et al. 2019 (``thinfilm-jax figure7``, ``make figure7``).
 * `bench` — ``thinfilm-jax bench``: runs the studies below, writes the report and the targets.
-* `error_runtime` — error against run time of every evaluation path and knob (issue 4).
+* `error_runtime` — error against run time of every evaluation path and knob.
 * `pareto` — the error-vs-run-time table, Pareto front and figure.
 * `peers` — `airy_reflectance` against tmm, NumPy and colour-science.
 * `specialisation` — the cost saved and the error added by each static specialisation.

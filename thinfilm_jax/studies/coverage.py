@@ -7,11 +7,11 @@ Two seeded experiments, one fixed mid-range initial guess for every film (d = 50
 η₂ = 1.4, α = 0.25 when free), observations from the converged `reference` patch radiance
 (quadrature 48 × 48) and fits with the default `FitOptions` (quadrature 16 × 16):
 
-* **global** (issue #13 §1): `--n-global` noise-free films, d ~ U(150, 1200) nm,
+* **global** (README, the global minimum): `--n-global` noise-free films, d ~ U(150, 1200) nm,
   η₂ ~ U(1.2, 1.7), η₃ = 2.0, κ₃ = 0.5, six views 0–70°, α = 0.15 known; d and η₂ free.
   A fit is in the global minimum when |Δd| < 1 nm and |Δη₂| < 1e-3 (noise-free data: the
   global minimum is the truth, loss ≈ 0).
-* **coverage** (issue #13 §2): `--n-coverage` films with d ~ U(150, 1200) nm,
+* **coverage** (README, error bars): `--n-coverage` films with d ~ U(150, 1200) nm,
   η₂ ~ U(1.2, 1.7), η₃ ~ U(1.5, 2.5), κ₃ ~ U(0, 0.8), α ~ U(0.1, 0.4), views drawn from three
   sets (six 0–70°, nine 0–80°, four 10–60°), Gaussian noise of standard deviation 1 % of
   the RMS of each film's observations; d, η₂ and α free (σ not given: s² is estimated

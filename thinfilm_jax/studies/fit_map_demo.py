@@ -1,4 +1,4 @@
-"""Thickness-map demo (issue #13 §3): a synthetic draining soap film rendered by the library,
+"""Thickness-map demo: a synthetic draining soap film rendered by the library,
 with noise, fitted pixel by pixel with and without the neighbour prior.
 
 The film is free-standing (air | soap η₂ = 1.33 | air: ``Film(d, 1.33, 1.0)``; no total

@@ -1,4 +1,4 @@
-"""Issue 11: `method="improved"` against `filtered` — error by region, IBL renders, cost, Pareto.
+"""`method="improved"` against `filtered` — error by region, IBL renders, cost, Pareto.
 
 ``python -m thinfilm_jax.studies.improved_study [--quick] [--out figures]`` writes
 ``improved.json``, ``improved.md`` (the tables of docs/improved.md and the README),

@@ -1,4 +1,4 @@
-"""Scaling across devices (issue #13 §4): the large jobs on 1, 2 and 4 devices.
+"""Scaling across devices: the large jobs on 1, 2 and 4 devices.
 
 ``python -m thinfilm_jax.studies.scaling`` (about 3 min here) starts one subprocess per
 device count k (``XLA_FLAGS=--xla_force_host_platform_device_count=k`` on a CPU host; on a

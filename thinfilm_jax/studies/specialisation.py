@@ -1,4 +1,4 @@
-r"""Leave out what a scene does not need, measured (issue 9 §5).
+r"""Leave out what a scene does not need, measured.
 
 Each specialisation is static — a Python value fixed at trace time, so `jax.jit` compiles a
 smaller program with no run-time branch — and is timed on one float32 batch of shading

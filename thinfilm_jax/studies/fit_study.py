@@ -176,10 +176,11 @@ def run(n, seed, out, models=tuple(MODELS), spectra=True):
     summary = {m: summarise(rows[m], first[m]) for m in models}
     if spectra:
         summary["spectrum(airy)"] = summarise(spec_rows, spec_first)
+    empty_arg = "''"  # (no backslash inside an f-string expression before Python 3.12)
     result = {
         # the arguments this run used (not sys.argv: `run` is also called from Python)
         "command": (f"python -m thinfilm_jax.studies.fit_study --n {n} --seed {seed} "
-                    f"--out {out or \"''\"} --models {','.join(models)}"
+                    f"--out {out or empty_arg} --models {','.join(models)}"
                     + ("" if spectra else " --no-spectra")),
         "seed": seed, "n": n, "noise": "Gaussian, sd = 1 % of the RMS of each film's data",
         "free": list(FREE), "tolerance": TOL,

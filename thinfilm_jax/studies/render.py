@@ -23,6 +23,7 @@ import dataclasses
 import functools
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -80,19 +81,25 @@ def thickness_field(n):
     return 550.0 + 200.0 * s  # |s| ≤ 1.5
 
 
+def map_label(name) -> str:
+    """A map's name for labels: a shipped name as is, a file by its stem (not its path)."""
+    name = str(name)
+    return name if name in SHIPPED else Path(name).stem
+
+
 def scene_setups(cfg: RenderConfig):
     """[(scene, label, envmap name, Film-maker(normals), α)]."""
     fig4 = (1.2, 2.0, 0.0)
     out = []
     for scene in cfg.scenes:
         if scene == "fig4":
-            out += [(scene, f"α=0.25, d=600 nm | {m}", m, lambda n: Film(600.0, *fig4), 0.25)
-                    for m in cfg.envmaps]
+            out += [(scene, f"α=0.25, d=600 nm | {map_label(m)}", m,
+                     lambda n: Film(600.0, *fig4), 0.25) for m in cfg.envmaps]
         elif scene == "fig3":
-            out += [(scene, f"α={a:g} | {cfg.envmaps[0]}", cfg.envmaps[0],
+            out += [(scene, f"α={a:g} | {map_label(cfg.envmaps[0])}", cfg.envmaps[0],
                      lambda n: Film(650.0, 1.3, 2.0, 0.5), a) for a in cfg.alphas]
         elif scene == "varying":
-            out += [(scene, f"d(x) ∈ [250, 850] nm | {m}", m,
+            out += [(scene, f"d(x) ∈ [250, 850] nm | {map_label(m)}", m,
                      lambda n: Film(thickness_field(n), *fig4), 0.25) for m in cfg.envmaps]
         else:
             raise ValueError(f"unknown scene {scene!r}; expected one of {SCENES}")
@@ -194,6 +201,18 @@ def summarise(results, cfg: RenderConfig) -> dict:
                                     "max": float(de.max())}
         rows.append(row)
     return {"config": dataclasses.asdict(cfg), "renders": rows}
+
+
+def summary_table(summary) -> str:
+    """The command's table: throughput and ΔE₀₀ against the reference per render and method;
+    "—" where there is no error (the reference itself, or no reference rendered)."""
+    lines = [f"{'render':44s} {'method':9s} {'pts/s':>9s} {'ΔE mean':>8s} {'ΔE p95':>8s}"]
+    for r in summary["renders"]:
+        for m, t in r["seconds"].items():
+            de = r["dE2000"].get(m)
+            err = (f"{de['mean']:8.2f} {de['p95']:8.2f}" if de else f"{'—':>8s} {'—':>8s}")
+            lines.append(f"{r['label']:44s} {m:9s} {r['points'] / t:9.0f} {err}")
+    return "\n".join(lines)
 
 
 def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:

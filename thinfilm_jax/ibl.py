@@ -5,7 +5,7 @@ $$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega
 
 | method      | how                                                                          |
 |-------------|------------------------------------------------------------------------------|
-| `reference` | texel-space quadrature of the piecewise-constant map: s×s Gauss–Legendre nodes in (cos θ, φ) inside every texel (exact solid-angle measure), R_jk(c) exact spectral on a fine c-grid, interpolated |
+| `reference` | texel-space quadrature of the piecewise-constant map (`ibl_reference`): one node per texel with the midpoint rule's error term, s×s Gauss–Legendre nodes in (cos θ, φ) in the texels where the lobe is narrow or cut by the horizon, R_jk(c) exact spectral on a fine c-grid, interpolated |
 | `mc`        | GGX visible-normal sampling (Heitz 2018), weight G₂/G₁, exact spectral R_jk per sample, nearest-texel radiance; fixed key and count |
 | `ideal`     | A(θ_o, α) · Σ_k R_jk(cos θ_o) P_k(ω_r, α): BB17 under the split sum (`kernels.ideal_kernel`, Ŝ from the LUT at σ = 0 by default) |
 | `filtered`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_r, α), R̄ = K 29 with the prefiltered moments μ_ω, Σ_ω (`kernels.filtered_kernel`) |
@@ -14,14 +14,10 @@ $$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega
 R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the per-channel
 ("diagonal") approximation L_j ≈ R_j P_j is the option `cross_band=False`.
 
-Reference accuracy. The integrand ρ̃⟨n,ω_i⟩R_jk is smooth inside a texel; s Gauss nodes per
-axis integrate it with an error that falls quickly once the sub-cells are narrower than
-the lobe (≈ α rad); `subdivisions=None` picks s = ⌈8 Δθ / α⌉ (Δθ = π/H, clipped to [2, 16]; grazing views
-compress the lobe, which a factor 4 did not resolve to 1e-3).
-R_jk(c) is tabulated on `n_cos` uniform nodes of c = cos θ₁ ∈ [0, 1] and interpolated
-linearly: the error is ≤ (Δc)²/8 · max|∂²R/∂c²|, about 1e-6 for d ≤ 1 µm at n_cos = 1024.
-The convergence in both (the SPEC's 1e-3 of the band maximum) is tested in tests/test_ibl.py.
-Cost per shading point: H·W·s² BRDF evaluations plus n_cos·n_λ Airy evaluations.
+Reference accuracy and cost: `thinfilm_jax.ibl_reference` (its docstring); the exhaustive
+rule (every texel with s × s nodes) stays reachable there as `exhaustive=True`, and
+tests/test_ibl_reference.py compares the two. The convergence (the SPEC's 1e-3 of the band
+maximum) is tested in tests/test_ibl.py.
 """
 
 from __future__ import annotations
@@ -58,7 +54,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
                     observer: str = DEFAULT_OBSERVER, options: ModelOptions = REALTIME_OPTIONS,
                     cross_band: bool = True, subdivisions: int | None = None,
                     n_cos: int = 1024, n_samples: int = 4096, key=None,
-                    batch_size: int | None = None) -> Array:
+                    batch_size: int | None = None, max_height: int | None = 256) -> Array:
     """Band radiances L_j (..., J) of a film under an environment map (SPEC §9).
 
     Args:
@@ -74,11 +70,15 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
             arithmetic ("auto" specialises a concrete dielectric film); ndf must be "ggx"
             (the prefiltered maps are GGX); quadrature does not apply.
         cross_band: True: R_jk under RGB light (SPEC §9); False: the diagonal approximation.
-        subdivisions: s Gauss nodes per axis inside each texel (reference); None = auto.
+        subdivisions: s Gauss nodes per axis inside each refined texel (reference); None = auto.
         n_cos: nodes of the reference's R_jk(cos θ₁) table.
         n_samples, key: Monte Carlo sample count and PRNG key (default key 0).
         batch_size: shading points evaluated together (default: 65536 for the real-time
             methods, about 2¹⁹ quadrature nodes' worth for the exact ones).
+        max_height: the reference resamples a map taller than this (solid-angle-exact
+            `envmap.downsample` by a power of two while the texel stays ≤ α_min/8 and
+            the map ≥ 128 rows) and warns; None integrates every texel
+            (`ibl_reference.resample_factor`).
     Shading points with ⟨n, ω_o⟩ ≤ 0 give 0.
     """
     V.check_film(film)
@@ -130,7 +130,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     return exact_radiance(Film(*args[:5]), args[5], *nv, env, method=method, observer=observer,
                           cross_band=bool(cross_band), arithmetic=arithmetic,
                           one_film=film.shape == (), subdivisions=subdivisions, n_cos=n_cos,
-                          n_samples=n_samples, key=key, batch_size=batch_size)
+                          n_samples=n_samples, key=key, batch_size=batch_size,
+                          max_height=max_height)
 
 
 

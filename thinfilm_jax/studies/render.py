@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,9 +32,10 @@ import numpy as np
 from .._io import atomic_write, write_json
 from ..airy import choose_arithmetic
 from ..colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
-from ..envmap import SHIPPED, load_envmap, lookup_bilinear, luminance_weights
+from ..envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..film import Film
 from ..ibl import REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
+from ..ibl_reference import resample_factor
 from ..prefilter import prefilter_envmap
 from ..sharding import batch_mesh, map_sharded, to_host
 
@@ -137,6 +139,22 @@ def _shader(cache: dict, devices, method: str, observer: str, film, alpha, env):
     return cache[key]
 
 
+def _reference_map(cache: dict, name, env, alpha):
+    """The map the reference integrates: a map taller than 256 rows resampled by
+    `ibl_reference.resample_factor` for this α (solid-angle-exact `downsample`), with a
+    warning, as `envmap_radiance` does for a concrete α."""
+    f = resample_factor(env.shape[0], float(np.min(alpha)), 256)
+    if f == 1:
+        return env
+    key = ("reference map", name, f)
+    if key not in cache:
+        warnings.warn(f"render: the reference integrates {map_label(name)} resampled by {f} "
+                      f"to {env.shape[0] // f} × {env.shape[1] // f} (texel ≤ α/8)",
+                      stacklevel=2)
+        cache[key] = downsample(env, f)
+    return cache[key]
+
+
 def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
     """Shade one sphere with every method; the shading points are split across `devices`
     (`thinfilm_jax.sharding.map_sharded`: None = every device, an int k = the first k)."""
@@ -154,7 +172,9 @@ def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
     for method in cfg.methods:
         src = env if method in ("reference", "mc") else pref
         exact = method in ("reference", "mc")
-        shade = _shader(cache, devices, method, cfg.observer, film, alpha, env)
+        if method == "reference":  # α is traced inside the sharded program: resample here
+            src = _reference_map(cache, name, env, alpha)
+        shade = _shader(cache, devices, method, cfg.observer, film, alpha, src)
         for _ in range(1 if exact else 2):  # real time: the second call is the warm one
             t0 = time.perf_counter()
             vals = to_host(shade(film, pts, alpha, wo, src))

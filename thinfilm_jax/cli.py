@@ -78,7 +78,7 @@ def _bench(args) -> int:
 def _render(args) -> int:
     devices = _devices(args)
     _enable_x64()
-    from .studies.render import RenderConfig, run_render
+    from .studies.render import RenderConfig, run_render, summary_table
 
     kw = {k: tuple(v) for k, v in (("envmaps", args.envmap), ("scenes", args.scene),
                                    ("methods", args.method), ("alphas", args.alphas)) if v}
@@ -88,12 +88,7 @@ def _render(args) -> int:
                        observer=args.observer, **kw)
     summary = run_render(cfg, out_dir=args.out, progress=not args.quiet, devices=devices)
     print(f"wrote {args.out}/ibl_{{{','.join(cfg.scenes)}}}.png, ibl_render.json, ibl_render.npz")
-    print(f"{'render':44s} {'method':9s} {'pts/s':>9s} {'ΔE mean':>8s} {'ΔE p95':>8s}")
-    for r in summary["renders"]:
-        for m, t in r["seconds"].items():
-            de = r["dE2000"].get(m, {})
-            print(f"{r['label']:44s} {m:9s} {r['points'] / t:9.0f} "
-                  f"{de.get('mean', float('nan')):8.2f} {de.get('p95', float('nan')):8.2f}")
+    print(summary_table(summary))
     return 0
 
 

@@ -32,7 +32,9 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
+import warnings
 from dataclasses import dataclass
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -40,9 +42,10 @@ import numpy as np
 from .._io import atomic_write, write_json
 from ..airy import choose_arithmetic
 from ..colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
-from ..envmap import SHIPPED, load_envmap, lookup_bilinear, luminance_weights
+from ..envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..film import Film
 from ..ibl import REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
+from ..ibl_reference import resample_factor
 from ..prefilter import prefilter_envmap
 from ..sharding import batch_mesh, map_sharded, to_host
 
@@ -90,19 +93,25 @@ def thickness_field(n):
     return 550.0 + 200.0 * s  # |s| ≤ 1.5
 
 
+def map_label(name) -> str:
+    """A map's name for labels: a shipped name as is, a file by its stem (not its path)."""
+    name = str(name)
+    return name if name in SHIPPED else Path(name).stem
+
+
 def scene_setups(cfg: RenderConfig):
     """[(scene, label, envmap name, Film-maker(normals), α)]."""
     fig4 = (1.2, 2.0, 0.0)
     out = []
     for scene in cfg.scenes:
         if scene == "fig4":
-            out += [(scene, f"α=0.25, d=600 nm | {m}", m, lambda n: Film(600.0, *fig4), 0.25)
-                    for m in cfg.envmaps]
+            out += [(scene, f"α=0.25, d=600 nm | {map_label(m)}", m,
+                     lambda n: Film(600.0, *fig4), 0.25) for m in cfg.envmaps]
         elif scene == "fig3":
-            out += [(scene, f"α={a:g} | {cfg.envmaps[0]}", cfg.envmaps[0],
+            out += [(scene, f"α={a:g} | {map_label(cfg.envmaps[0])}", cfg.envmaps[0],
                      lambda n: Film(650.0, 1.3, 2.0, 0.5), a) for a in cfg.alphas]
         elif scene == "varying":
-            out += [(scene, f"d(x) ∈ [250, 850] nm | {m}", m,
+            out += [(scene, f"d(x) ∈ [250, 850] nm | {map_label(m)}", m,
                      lambda n: Film(thickness_field(n), *fig4), 0.25) for m in cfg.envmaps]
         else:
             raise ValueError(f"unknown scene {scene!r}; expected one of {SCENES}")
@@ -140,6 +149,22 @@ def _shader(cache: dict, devices, method: str, observer: str, film, alpha, env):
     return cache[key]
 
 
+def _reference_map(cache: dict, name, env, alpha):
+    """The map the reference integrates: a map taller than 256 rows resampled by
+    `ibl_reference.resample_factor` for this α (solid-angle-exact `downsample`), with a
+    warning, as `envmap_radiance` does for a concrete α."""
+    f = resample_factor(env.shape[0], float(np.min(alpha)), 256)
+    if f == 1:
+        return env
+    key = ("reference map", name, f)
+    if key not in cache:
+        warnings.warn(f"render: the reference integrates {map_label(name)} resampled by {f} "
+                      f"to {env.shape[0] // f} × {env.shape[1] // f} (texel ≤ α/8)",
+                      stacklevel=2)
+        cache[key] = downsample(env, f)
+    return cache[key]
+
+
 def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
     """Shade one sphere with every method; the shading points are split across `devices`
     (`thinfilm_jax.sharding.map_sharded`: None = every device, an int k = the first k)."""
@@ -157,7 +182,9 @@ def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
     for method in cfg.methods:
         src = env if method in ("reference", "mc") else pref
         exact = method in ("reference", "mc")
-        shade = _shader(cache, devices, method, cfg.observer, film, alpha, env)
+        if method == "reference":  # α is traced inside the sharded program: resample here
+            src = _reference_map(cache, name, env, alpha)
+        shade = _shader(cache, devices, method, cfg.observer, film, alpha, src)
         for _ in range(1 if exact else 2):  # real time: the second call is the warm one
             t0 = time.perf_counter()
             vals = to_host(shade(film, pts, alpha, wo, src))
@@ -204,6 +231,18 @@ def summarise(results, cfg: RenderConfig) -> dict:
                                     "max": float(de.max())}
         rows.append(row)
     return {"config": dataclasses.asdict(cfg), "renders": rows}
+
+
+def summary_table(summary) -> str:
+    """The command's table: throughput and ΔE₀₀ against the reference per render and method;
+    "—" where there is no error (the reference itself, or no reference rendered)."""
+    lines = [f"{'render':44s} {'method':9s} {'pts/s':>9s} {'ΔE mean':>8s} {'ΔE p95':>8s}"]
+    for r in summary["renders"]:
+        for m, t in r["seconds"].items():
+            de = r["dE2000"].get(m)
+            err = (f"{de['mean']:8.2f} {de['p95']:8.2f}" if de else f"{'—':>8s} {'—':>8s}")
+            lines.append(f"{r['label']:44s} {m:9s} {r['points'] / t:9.0f} {err}")
+    return "\n".join(lines)
 
 
 def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:

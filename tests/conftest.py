@@ -1,6 +1,6 @@
 """Test configuration: float64 by default, strict dtype promotion (tolerances are named in the
 test module that asserts them), one compilation cache per test run, and the work units of
-``pytest -n 2 --dist loadgroup`` (the Makefile's `make test`)."""
+``pytest -n 2 --dist loadfile`` (the Makefile's `make test`)."""
 
 import atexit
 import os
@@ -29,45 +29,52 @@ jax.config.update("jax_compilation_cache_dir", os.environ["THINFILM_JAX_TEST_CAC
 
 import pytest  # noqa: E402
 
-# Work units of `--dist loadgroup`: by default one per test file, so that a module's fixtures
-# and the programs its tests share are built once, in one worker (as `--dist loadfile`).
-# Tests that share nothing expensive with their file get units of their own, so that long
-# tests can run on both workers: each notebook runs in its own kernel, and the stiff grids of
+# Work units of `pytest -n 2 --dist loadfile` (the Makefile's `make test`): one per test file,
+# so that a module's fixtures and the programs its tests share are built once, in one
+# worker; tests that share nothing expensive with their file get units of their own, so that
+# long tests run on both workers: each notebook runs in its own kernel, and the stiff grids of
 # tests/test_stability.py share one compiled group per dtype (`stability._patch_group`).
-def _unit(item) -> str:
-    name = item.path.name
-    if name == "test_notebooks.py" or item.name == "test_fitting_notebook_executes":
-        return f"{name}::{item.name}"
-    if name == "test_stability.py":
-        params = getattr(item, "callspec", None)
-        return f"{name}:{params.params.get('dtype', 'float64') if params else 'float64'}"
-    return name
+def _unit(nodeid: str) -> str:
+    path, _, name = nodeid.partition("::")
+    if path.endswith("test_notebooks.py") or name == "test_fitting_notebook_executes":
+        return nodeid
+    if path.endswith("test_stability.py"):
+        return f"{path}:{'float32' if nodeid.endswith('-float32]') else 'float64'}"
+    return path
 
 
 # Units known to be long start first (notebooks ≈ 1 min each, a stiff patch grid ≈ 1 min per
-# dtype, measured on the 2-core machine); with xdist's default order (most tests first)
-# single-test units would start last and leave one worker idle at the end. The order only
-# matters under `--dist loadgroup`; a plain `pytest` run keeps the collection order.
-FIRST = ("test_notebooks.py::", "test_fit.py::test_fitting_notebook_executes",
-         "test_stability.py:")
+# dtype on the 2-core machine; matched anywhere in the unit): xdist's own order (most tests first) would start single-test
+# units last and leave one worker alone with a long test at the end.
+FIRST = ("tests/test_notebooks.py::", "tests/test_fit.py::test_fitting_notebook_executes",
+         "tests/test_stability.py:")
 
 
-def _rank(item) -> int:
-    unit = _unit(item)
-    return next((i for i, p in enumerate(FIRST) if unit.startswith(p)), len(FIRST))
+def _rank(nodeid: str) -> int:
+    unit = _unit(nodeid)
+    return next((i for i, p in enumerate(FIRST) if p in unit), len(FIRST))
 
 
-def pytest_configure(config):
-    if getattr(config.option, "dist", "no") == "loadgroup":
-        config.option.loadscopereorder = False  # the order of `pytest_collection_modifyitems`
+@pytest.hookimpl(optionalhook=True, tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    """`--dist loadfile` with the units above (pytest-xdist's `--dist loadgroup` marks do not
+    reach the scheduler under pytest 9); other modes are xdist's own."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class Units(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            return _unit(nodeid)
+
+    config.option.loadscopereorder = False  # the workers' order (`FIRST` first)
+    return Units(config, log)
 
 
 def pytest_collection_modifyitems(config, items):
-    for item in items:
-        if item.get_closest_marker("xdist_group") is None:
-            item.add_marker(pytest.mark.xdist_group(_unit(item)))
-    if getattr(config.option, "dist", "no") == "loadgroup":
-        items.sort(key=_rank)  # stable: a unit's tests keep their order
+    # in xdist's workers only (the scheduler reads their collection): `FIRST` first, stable
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        items.sort(key=lambda item: _rank(item.nodeid))
 
 
 @pytest.fixture(autouse=True)

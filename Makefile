@@ -17,8 +17,9 @@ setup: $(STAMP)
 figure7: $(STAMP)
 	$(BIN)/thinfilm-jax figure7 --out figures
 
+# two pytest-xdist workers (the CI machine has 2 cores); work units: tests/conftest.py
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 bench: $(STAMP)
 	$(BIN)/thinfilm-jax bench --out figures

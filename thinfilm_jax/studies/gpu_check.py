@@ -76,7 +76,7 @@ def run_tests(budget_s: float, extra: list[str] | None = None) -> dict:
     cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rf"]
     if importlib.util.find_spec("xdist") is not None:
         workers = max(1, min(8, (os.cpu_count() or 2) // 2))
-        cmd += ["-n", str(workers)]
+        cmd += ["-n", str(workers), "--dist", "loadfile"]
     cmd += extra or []
     env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false", PYTHONUNBUFFERED="1")
     t0 = time.perf_counter()

@@ -295,6 +295,14 @@ def lookup_lobe(table: BinTable, normal, view, cos_o, alpha):
 
 
 # ----------------------------------------------------------------------------- kernel
+def _bin_bands(film: Film, c, s, observer, terms, shat, lut, arithmetic) -> Array:
+    """K 29 in one bin (mean c̄ = `c`, spread s), shape broadcast(film, c, s) + (J,)."""
+    d = opd_of_cos(film, c)
+    slope = safe_div((2.0 * film.thickness * film.eta_outer) ** 2 * c, d)  # D'(c)
+    return filtered_bands(film, c, OPDMoments(d, jnp.abs(slope) * s), observer, terms=terms,
+                          shat=shat, lut=lut, arithmetic=arithmetic, interpolation="linear")
+
+
 def improved_bins(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
                   terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
                   arithmetic: str = "complex") -> Array:
@@ -308,28 +316,35 @@ def improved_bins(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
         terms: M Fourier orders.
         shat: "lut" (bilinear read of `lut`), "exact" or "gaussian".
         arithmetic: "complex" or "real" (κ₃ = 0 only) Fresnel arithmetic.
+    Each bin is its own per-point program (the bins are not broadcast against the film on a
+    bin axis, which XLA would materialise); the K results are stacked last.
     """
     cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
-    lead = jnp.broadcast_shapes(cos_bins.shape[:-1], std_bins.shape[:-1],
-                                *(jnp.shape(x) for x in film))
-    shape = lead + cos_bins.shape[-1:]
-    cos_bins, std_bins = jnp.broadcast_to(cos_bins, shape), jnp.broadcast_to(std_bins, shape)
-    f = Film(*(jnp.broadcast_to(jnp.broadcast_to(jnp.asarray(x), lead)[..., None], shape)
-               for x in film))
-    d = opd_of_cos(f, cos_bins)
-    slope = safe_div((2.0 * f.thickness * f.eta_outer) ** 2 * cos_bins, d)  # D'(c)
-    sd = jnp.abs(slope) * std_bins
-    return filtered_bands(f, cos_bins, OPDMoments(d, sd), observer, terms=terms, shat=shat,
-                          lut=lut, arithmetic=arithmetic, interpolation="linear")
+    k = max(cos_bins.shape[-1], std_bins.shape[-1])
+    cos_bins = jnp.broadcast_to(cos_bins, cos_bins.shape[:-1] + (k,))
+    std_bins = jnp.broadcast_to(std_bins, std_bins.shape[:-1] + (k,))
+    film = Film(*(jnp.asarray(x) for x in film))
+    return jnp.stack([_bin_bands(film, cos_bins[..., b], std_bins[..., b], observer, terms,
+                                 shat, lut, arithmetic) for b in range(k)], axis=-2)
 
 
 def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
                    terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
                    arithmetic: str = "complex") -> Array:
     """The mean of `improved_bins` over the K equal-probability bins: R̄_j (..., J), the
-    model under uniform light. Arguments as `improved_bins`."""
-    return jnp.mean(improved_bins(film, cos_bins, std_bins, observer, terms=terms, shat=shat,
-                                  lut=lut, arithmetic=arithmetic), axis=-2)
+    model under uniform light. Arguments as `improved_bins`; the bins are summed as they are
+    computed (no bin axis)."""
+    cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
+    k = max(cos_bins.shape[-1], std_bins.shape[-1])
+    cos_bins = jnp.broadcast_to(cos_bins, cos_bins.shape[:-1] + (k,))
+    std_bins = jnp.broadcast_to(std_bins, std_bins.shape[:-1] + (k,))
+    film = Film(*(jnp.asarray(x) for x in film))
+    total = None
+    for b in range(k):
+        r = _bin_bands(film, cos_bins[..., b], std_bins[..., b], observer, terms, shat, lut,
+                       arithmetic)
+        total = r if total is None else total + r
+    return total * (1.0 / k)
 
 
 def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,
@@ -381,7 +396,7 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
             (the map's cross-band table when `cross_band`).
         cross_band: R_jc under RGB light (SPEC §9) or the diagonal R_j P_j.
     """
-    from .prefilter import lookup_albedo, lookup_radiance
+    from .prefilter import channel_sum, lookup_albedo, lookup_radiance
     from .uplift import cross_band_name
 
     cos_o = jnp.sum(normal * view, axis=-1)
@@ -400,7 +415,7 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     r = improved_bins(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,
                       arithmetic=arithmetic)  # (..., K, J[·3])
     if cross_band:
-        out = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * rad[..., None, :], axis=-1)
+        out = channel_sum(r.reshape(r.shape[:-1] + (3, 3)), rad)
     else:
         out = r * rad
     return jnp.where(up[..., None], a[..., None] * jnp.mean(out, axis=-2), 0.0)

@@ -42,8 +42,8 @@ from .kernels import filtered_kernel, ideal_kernel
 from .lut import build_shat_lut
 from .microfacet import normal_distribution, smith_g1, smith_g2
 from .options import ModelOptions, check_options
-from .prefilter import (PrefilteredEnvMap, channel_sum, lookup_albedo,
-                        lookup_prefiltered, moments_to_mean_cov, prefilter_envmap)
+from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered,
+                        moments_to_mean_cov, prefilter_envmap)
 from .reflectance import spectral_bands
 from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .uplift import cross_band_name
@@ -216,7 +216,7 @@ def _realtime_points(film, alpha, normal, view, pref, cfg):
         r = r.reshape(r.shape[:-1] + (3, 3))  # (..., [k,] j, k)
         if r.ndim > rad.ndim + 1:  # per-channel moments: keep k of the moments = k of R
             r = jnp.diagonal(r, axis1=-3, axis2=-1)  # (..., j, k)
-        out = channel_sum(r, rad)
+        out = jnp.sum(r * rad[..., None, :], axis=-1)
     else:
         if r.ndim > rad.ndim:
             r = jnp.diagonal(r, axis1=-2, axis2=-1)

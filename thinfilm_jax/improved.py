@@ -396,7 +396,7 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
             (the map's cross-band table when `cross_band`).
         cross_band: R_jc under RGB light (SPEC §9) or the diagonal R_j P_j.
     """
-    from .prefilter import channel_sum, lookup_albedo, lookup_radiance
+    from .prefilter import lookup_albedo, lookup_radiance
     from .uplift import cross_band_name
 
     cos_o = jnp.sum(normal * view, axis=-1)
@@ -415,7 +415,7 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     r = improved_bins(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,
                       arithmetic=arithmetic)  # (..., K, J[·3])
     if cross_band:
-        out = channel_sum(r.reshape(r.shape[:-1] + (3, 3)), rad)
+        out = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * rad[..., None, :], axis=-1)
     else:
         out = r * rad
     return jnp.where(up[..., None], a[..., None] * jnp.mean(out, axis=-2), 0.0)

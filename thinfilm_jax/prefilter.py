@@ -238,12 +238,3 @@ def moments_to_mean_cov(m):
     second = jnp.stack([jnp.stack([xx, xy, zx], -1), jnp.stack([xy, yy, yz], -1),
                         jnp.stack([zx, yz, zz], -1)], -2)
     return mean, second - mean[..., :, None] * mean[..., None, :]
-
-
-def channel_sum(r, rad):
-    """Σ_k R_jk P_k (..., J) from R (..., J, K) and P (..., K) as K explicit products per
-    band (elementwise, no reduction: XLA:CPU hands reductions to a library call, a loop
-    boundary)."""
-    n_j, n_k = r.shape[-2], r.shape[-1]
-    return jnp.stack([sum(r[..., j, k] * rad[..., k] for k in range(n_k)) for j in range(n_j)],
-                     axis=-1)

@@ -34,7 +34,8 @@ $$ \bar R_j \approx \frac1K\sum_{k=1}^{K}\Big\{C_0(\bar c_k)\hat S_j(0) + \sum_{
 
 The skewed mixture of K Gaussians on D follows the true distribution of D(c), and the C₀
 average is a K-point rule placed where the mass is. K = 3 is the default (measured: 1.1–1.2× the
-cost of `filtered` per shading point on a CPU; K = 2 is cheaper and about 1.6× less accurate,
+cost of `filtered` per shading point on a CPU before the kernels were written for XLA fusion,
+about 5× since: figures/kernel_bench.md; K = 2 is cheaper and about 1.6× less accurate,
 K = 4 more accurate and dearer: docs/improved.md); K = 1 is K 29 fed with the exact E[c],
 Var c of the lobe instead of ⟨ω_o, μ_ω⟩.
 
@@ -77,7 +78,8 @@ prefilter's accuracy).
 
 Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
 0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,
-at 1.17× its cost per shading point; sphere renders under the shipped maps 0.43 / 0.42 ×.
+at 1.17× its cost per shading point (before the fused kernels; figures/kernel_bench.md now
+has about 5×); sphere renders under the shipped maps 0.43 / 0.42 ×.
 Measured gains, cost and the regions where it is not better: docs/improved.md.
 
 Example:

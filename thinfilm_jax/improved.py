@@ -34,7 +34,8 @@ $$ \bar R_j \approx \frac1K\sum_{k=1}^{K}\Big\{C_0(\bar c_k)\hat S_j(0) + \sum_{
 
 The skewed mixture of K Gaussians on D follows the true distribution of D(c), and the C₀
 average is a K-point rule placed where the mass is. K = 3 is the default (measured: 1.1–1.2× the
-cost of `filtered` per shading point on a CPU; K = 2 is cheaper and about 1.6× less accurate,
+cost of `filtered` per shading point on a CPU before the kernels were written for XLA fusion,
+about 5× since: figures/kernel_bench.md; K = 2 is cheaper and about 1.6× less accurate,
 K = 4 more accurate and dearer: docs/improved.md); K = 1 is K 29 fed with the exact E[c],
 Var c of the lobe instead of ⟨ω_o, μ_ω⟩.
 
@@ -77,7 +78,8 @@ prefilter's accuracy).
 
 Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
 0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,
-at 1.17× its cost per shading point; sphere renders under the shipped maps 0.43 / 0.42 ×.
+at 1.17× its cost per shading point (before the fused kernels; figures/kernel_bench.md now
+has about 5×); sphere renders under the shipped maps 0.43 / 0.42 ×.
 Measured gains, cost and the regions where it is not better: docs/improved.md.
 
 Example:
@@ -295,6 +297,14 @@ def lookup_lobe(table: BinTable, normal, view, cos_o, alpha):
 
 
 # ----------------------------------------------------------------------------- kernel
+def _bin_bands(film: Film, c, s, observer, terms, shat, lut, arithmetic) -> Array:
+    """K 29 in one bin (mean c̄ = `c`, spread s), shape broadcast(film, c, s) + (J,)."""
+    d = opd_of_cos(film, c)
+    slope = safe_div((2.0 * film.thickness * film.eta_outer) ** 2 * c, d)  # D'(c)
+    return filtered_bands(film, c, OPDMoments(d, jnp.abs(slope) * s), observer, terms=terms,
+                          shat=shat, lut=lut, arithmetic=arithmetic, interpolation="linear")
+
+
 def improved_bins(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
                   terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
                   arithmetic: str = "complex") -> Array:
@@ -308,28 +318,35 @@ def improved_bins(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
         terms: M Fourier orders.
         shat: "lut" (bilinear read of `lut`), "exact" or "gaussian".
         arithmetic: "complex" or "real" (κ₃ = 0 only) Fresnel arithmetic.
+    Each bin is its own per-point program (the bins are not broadcast against the film on a
+    bin axis, which XLA would materialise); the K results are stacked last.
     """
     cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
-    lead = jnp.broadcast_shapes(cos_bins.shape[:-1], std_bins.shape[:-1],
-                                *(jnp.shape(x) for x in film))
-    shape = lead + cos_bins.shape[-1:]
-    cos_bins, std_bins = jnp.broadcast_to(cos_bins, shape), jnp.broadcast_to(std_bins, shape)
-    f = Film(*(jnp.broadcast_to(jnp.broadcast_to(jnp.asarray(x), lead)[..., None], shape)
-               for x in film))
-    d = opd_of_cos(f, cos_bins)
-    slope = safe_div((2.0 * f.thickness * f.eta_outer) ** 2 * cos_bins, d)  # D'(c)
-    sd = jnp.abs(slope) * std_bins
-    return filtered_bands(f, cos_bins, OPDMoments(d, sd), observer, terms=terms, shat=shat,
-                          lut=lut, arithmetic=arithmetic, interpolation="linear")
+    k = max(cos_bins.shape[-1], std_bins.shape[-1])
+    cos_bins = jnp.broadcast_to(cos_bins, cos_bins.shape[:-1] + (k,))
+    std_bins = jnp.broadcast_to(std_bins, std_bins.shape[:-1] + (k,))
+    film = Film(*(jnp.asarray(x) for x in film))
+    return jnp.stack([_bin_bands(film, cos_bins[..., b], std_bins[..., b], observer, terms,
+                                 shat, lut, arithmetic) for b in range(k)], axis=-2)
 
 
 def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
                    terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
                    arithmetic: str = "complex") -> Array:
     """The mean of `improved_bins` over the K equal-probability bins: R̄_j (..., J), the
-    model under uniform light. Arguments as `improved_bins`."""
-    return jnp.mean(improved_bins(film, cos_bins, std_bins, observer, terms=terms, shat=shat,
-                                  lut=lut, arithmetic=arithmetic), axis=-2)
+    model under uniform light. Arguments as `improved_bins`; the bins are summed as they are
+    computed (no bin axis)."""
+    cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
+    k = max(cos_bins.shape[-1], std_bins.shape[-1])
+    cos_bins = jnp.broadcast_to(cos_bins, cos_bins.shape[:-1] + (k,))
+    std_bins = jnp.broadcast_to(std_bins, std_bins.shape[:-1] + (k,))
+    film = Film(*(jnp.asarray(x) for x in film))
+    total = None
+    for b in range(k):
+        r = _bin_bands(film, cos_bins[..., b], std_bins[..., b], observer, terms, shat, lut,
+                       arithmetic)
+        total = r if total is None else total + r
+    return total * (1.0 / k)
 
 
 def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,

@@ -77,7 +77,7 @@ def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2
         arithmetic: "complex" (complex η₃ + iκ₃) or "real" (κ₃ = 0 only).
     """
     if shat == "lut":
-        opd = OPDMoments(opd_of_cos(film, cos_o), jnp.zeros_like(jnp.asarray(cos_o)))
+        opd = OPDMoments(opd_of_cos(film, cos_o), None)  # σ_D = 0 exactly: the σ = 0 column
         return filtered_bands(film, cos_o, opd, observer, terms=terms, shat="lut", lut=lut,
                               arithmetic=arithmetic)
     return fourier_bands(film, cos_o, observer, terms=terms, shat=shat, arithmetic=arithmetic)

@@ -106,10 +106,73 @@ def build_shat_lut(observer: str = DEFAULT_OBSERVER, *, d_mu: float = 25.0,
                    jnp.asarray(mmax, dtype), jnp.asarray(smax, dtype))
 
 
+def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic"):
+    """(Re, Im) of Ŝ_j(+a, σ²) for a ≥ 0, each of shape broadcast(a, sigma) + (J,), real.
+
+    The read of `lookup` written for one fused loop (the real-time kernels): flat table
+    indices (one gather per tap, all sharing one index array), the taps weighted on real
+    parts (no contraction), the carrier e^{−2πi a ν̄_j} by `airy.sincos_turns`.
+    ``sigma=None`` means σ = 0 exactly: the σ stencil's weights are then (0, 1, 0, 0)
+    (cubic) or (1, 0) (linear), so only the σ = 0 column is read (the same value, 4× fewer
+    taps). 0 beyond μ_max; σ clamped at σ_max.
+    """
+    from .airy import sincos_turns
+
+    n_mu = lut.table.shape[0] - 3
+    n_sig = lut.table.shape[1] - 3
+    cols, n_bands = lut.table.shape[1], lut.table.shape[-1]
+    a = jnp.asarray(a)
+    if sigma is not None:
+        a, sigma = jnp.broadcast_arrays(a, jnp.asarray(sigma))
+    tm = jnp.minimum(a, lut.mu_max) * ((n_mu - 1) / lut.mu_max)
+    fm = jnp.clip(jnp.floor(tm), 0, n_mu - 2)
+    um = tm - fm
+    flat = fm.astype(jnp.int32) * cols
+    if sigma is not None:
+        ts = jnp.minimum(sigma, lut.sigma_max) * ((n_sig - 1) / lut.sigma_max)
+        fs = jnp.clip(jnp.floor(ts), 0, n_sig - 2)
+        us = ts - fs
+        flat = flat + fs.astype(jnp.int32)
+    table = lut.table.reshape(-1, n_bands)  # rows of J bands: ((n_mu + 3)(n_sig + 3), J)
+
+    def lift(w):  # per-point weights against the band axis
+        return w[..., None]
+
+    if interpolation == "cubic":
+        wm = [lift(w) for w in _catmull_rom(um)]
+        ws = [lift(w) for w in _catmull_rom(us)] if sigma is not None else None
+        rows, col_off = range(4), (range(4) if sigma is not None else (1,))
+    elif interpolation == "linear":
+        wm = [lift(1.0 - um), lift(um)]
+        ws = [lift(1.0 - us), lift(us)] if sigma is not None else None
+        rows, col_off = (1, 2), ((1, 2) if sigma is not None else (1,))
+    else:
+        raise ValueError(f"unknown interpolation {interpolation!r}; expected 'cubic' or "
+                         f"'linear'")
+    er = ei = None
+    for k, i in enumerate(rows):
+        rr = ri = None
+        for m, j in enumerate(col_off):
+            v = table[flat + (i * cols + j)]
+            vr, vi = jnp.real(v), jnp.imag(v)
+            if ws is not None:
+                vr, vi = ws[m] * vr, ws[m] * vi
+            rr = vr if rr is None else rr + vr
+            ri = vi if ri is None else ri + vi
+        er = wm[k] * rr if er is None else er + wm[k] * rr
+        ei = wm[k] * ri if ei is None else ei + wm[k] * ri
+    carrier = jnp.reshape(lut.carrier, (1,) * a.ndim + (-1,))  # ranks aligned explicitly
+    c, s = sincos_turns(-lift(a) * carrier)  # e^{−2πi a ν̄_j}
+    inside = lift(a <= lut.mu_max)
+    return (jnp.where(inside, er * c - ei * s, 0.0), jnp.where(inside, er * s + ei * c, 0.0))
+
+
 def _catmull_rom(f):
-    f2, f3 = f * f, f * f * f
-    return jnp.stack([(-f3 + 2 * f2 - f) / 2, (3 * f3 - 5 * f2 + 2) / 2,
-                      (-3 * f3 + 4 * f2 + f) / 2, (f3 - f2) / 2], axis=-1)
+    """The four Catmull–Rom weights at fraction f of the cell (C¹, third order)."""
+    f2 = f * f
+    f3 = f2 * f
+    return ((-f3 + 2 * f2 - f) * 0.5, (3 * f3 - 5 * f2 + 2) * 0.5,
+            (-3 * f3 + 4 * f2 + f) * 0.5, (f3 - f2) * 0.5)
 
 
 def lookup(lut: ShatLUT, mu, sigma, *, interpolation: str = "cubic") -> Array:
@@ -124,36 +187,9 @@ def lookup(lut: ShatLUT, mu, sigma, *, interpolation: str = "cubic") -> Array:
     The demodulated envelope is interpolated, the carrier e^{−2πi|μ|/λ_c} is exact; Ŝ(−μ) =
     conj Ŝ(μ); 0 beyond μ_max; σ clamped at σ_max.
     """
-    n_mu = lut.table.shape[0] - 3
-    n_sig = lut.table.shape[1] - 3
     mu, sigma = jnp.broadcast_arrays(jnp.asarray(mu), jnp.asarray(sigma))
-    a = jnp.abs(mu)
-    inside = a <= lut.mu_max
-    tm = jnp.minimum(a, lut.mu_max) / lut.mu_max * (n_mu - 1)
-    ts = jnp.minimum(sigma, lut.sigma_max) / lut.sigma_max * (n_sig - 1)
-    fm = jnp.clip(jnp.floor(tm), 0, n_mu - 2)
-    fs = jnp.clip(jnp.floor(ts), 0, n_sig - 2)
-    im, is_ = fm.astype(jnp.int32), fs.astype(jnp.int32)
-    t, cdt = lut.table, lut.table.dtype
-    if interpolation == "cubic":
-        wm, ws = _catmull_rom(tm - fm).astype(cdt), _catmull_rom(ts - fs).astype(cdt)
-        off = jnp.arange(4, dtype=jnp.int32)
-        patch = t[(im[..., None] + off)[..., :, None], (is_[..., None] + off)[..., None, :]]
-        env = jnp.einsum("...a,...b,...abj->...j", wm, ws, patch,
-                         precision=jax.lax.Precision.HIGHEST)
-    elif interpolation == "linear":
-        u, v = (tm - fm)[..., None].astype(cdt), (ts - fs)[..., None].astype(cdt)
-        im, is_ = im + 1, is_ + 1  # row/column 0 is the cubic stencil's padding
-        env = ((t[im, is_] * (1 - u) + t[im + 1, is_] * u) * (1 - v)
-               + (t[im, is_ + 1] * (1 - u) + t[im + 1, is_ + 1] * u) * v)
-    else:
-        raise ValueError(f"unknown interpolation {interpolation!r}; expected 'cubic' or "
-                         f"'linear'")
-    carrier = jnp.reshape(lut.carrier, (1,) * a.ndim + (-1,))  # ranks aligned explicitly
-    arg = (-2.0 * jnp.pi) * a[..., None] * carrier
-    val = env * jax.lax.complex(jnp.cos(arg), jnp.sin(arg))
-    val = jnp.where((mu < 0)[..., None], jnp.conj(val), val)
-    return jnp.where(inside[..., None], val, jnp.zeros((), val.dtype))
+    re, im = read_parts(lut, jnp.abs(mu), sigma, interpolation=interpolation)
+    return jax.lax.complex(re, jnp.where((mu < 0)[..., None], -im, im))
 
 
 def lut_max_error(observer: str = DEFAULT_OBSERVER, n: int = 20000, seed: int = 0,

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 from jax import Array
 
@@ -75,9 +74,14 @@ def taylor_opd_moments(film: Film, mu_c, var_c) -> OPDMoments:
 
 
 def project_light_moments(wo, mean, cov):
-    """μ_c = ⟨ω_o, μ_ω⟩ and σ_c² = ω_oᵀ Σ_ω ω_o (K 20–21); vectors on the last axis."""
-    mu_c = jnp.sum(wo * mean, axis=-1)
-    var_c = jnp.einsum("...i,...ij,...j->...", wo, cov, wo, precision=jax.lax.Precision.HIGHEST)
+    """μ_c = ⟨ω_o, μ_ω⟩ and σ_c² = ω_oᵀ Σ_ω ω_o (K 20–21); vectors on the last axis.
+
+    Written as explicit products and sums over the three components (no contraction, no
+    reduction): elementwise, so XLA fuses it into the kernel's loop."""
+    w = [wo[..., i] for i in range(3)]
+    mu_c = w[0] * mean[..., 0] + w[1] * mean[..., 1] + w[2] * mean[..., 2]
+    var_c = sum(w[i] * (cov[..., i, 0] * w[0] + cov[..., i, 1] * w[1] + cov[..., i, 2] * w[2])
+                for i in range(3))
     return mu_c, jnp.maximum(var_c, 0.0)
 
 

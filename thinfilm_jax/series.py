@@ -140,3 +140,95 @@ def fourier_band_reflectance(terms: SeriesTerms, shat, terms_m: int, shat0, *,
         if partial_sums:
             sums.append(c0 + amp * acc)
     return jnp.stack(sums) if partial_sums else c0 + amp * acc
+
+
+# ----------------------------------------------------------------------------- fused
+def _complex_div(nr, ni, dr, di):
+    """(nr + i ni) / (dr + i di) on real parts, 0 where the denominator is 0: the arithmetic
+    of `fresnel.safe_div` (scaled by 1/(|Re| + |Im|), one shared reciprocal), double-where."""
+    zero = (dr == 0) & (di == 0)
+    dr = jnp.where(zero, 1.0, dr)
+    k = 1.0 / (jnp.abs(dr) + jnp.abs(di))
+    dr, di = dr * k, di * k
+    k = k / (dr * dr + di * di)
+    return (jnp.where(zero, 0.0, (nr * dr + ni * di) * k),
+            jnp.where(zero, 0.0, (ni * dr - nr * di) * k))
+
+
+def _csqrt_upper(x, y):
+    """`fresnel.sqrt_upper` of x + iy on real parts (branch Im ≥ 0, finite gradient at 0)."""
+    zero = (x == 0) & (y == 0)
+    x = jnp.where(zero, 1.0, x)
+    t = jnp.sqrt(0.5 * (jnp.hypot(x, y) + jnp.abs(x)))
+    h = 0.5 * y / t
+    right = x >= 0
+    re = jnp.where(right, jnp.where(y < 0, -t, t), h)
+    im = jnp.where(right, jnp.abs(h), t)
+    return jnp.where(zero, 0.0, re), jnp.where(zero, 0.0, im)
+
+
+class FusedTerms(NamedTuple):
+    """`SeriesTerms` written for one fused loop: each polarisation its own array (no stacked
+    axis, which XLA would materialise) and z on real parts. Tuples are (s, p)."""
+
+    c0: tuple  # C₀ per polarisation
+    amp: tuple  # R* − T₁₂₁
+    z_re: tuple  # Re z, z = r₂₁ r₂₃
+    z_im: tuple  # Im z (zeros on the dielectric path)
+    opd: Array  # D = 2 d Re q₂ (nm)
+
+
+def fused_terms(film: Film, cos_theta, *, arithmetic: str = "complex") -> FusedTerms:
+    """`series_terms` (the same arithmetic, operation for operation) on real parts, for the
+    real-time kernels: every output is an elementwise function of the inputs, which XLA fuses
+    into the kernel's single loop. No validation (traced inputs of the kernels)."""
+    eta1, eta2, eta3, kappa3, d = (film.eta_outer, film.eta_film, film.eta_base,
+                                   film.kappa_base, film.thickness)
+    c = jnp.asarray(cos_theta)
+    s2 = eta1**2 * (1.0 - c) * (1.0 + c)
+    q1 = eta1 * c
+    eps1, eps2 = eta1**2, eta2**2
+    zero = jnp.zeros_like(s2 + eps2)
+    if arithmetic == "real":
+        from .fresnel import safe_sqrt
+
+        q2r, q2i = safe_sqrt(eps2 - s2), zero
+        q3r, q3i = safe_sqrt(eta3**2 - s2), zero
+        e3r, e3i = eta3**2, zero
+    elif arithmetic == "complex":
+        # q₂ = √(η₂² − s²) on the upper branch: real or imaginary (`fresnel.sqrt_upper` of a
+        # real argument); q₃ = √(ε₃ − s²) with ε₃ = (η₃ + iκ₃)²
+        q2r, q2i = _csqrt_upper(eps2 - s2, zero)
+        e3r, e3i = eta3 * eta3 - kappa3 * kappa3, 2.0 * eta3 * kappa3
+        q3r, q3i = _csqrt_upper(e3r - s2, e3i + zero)
+    else:
+        raise ValueError(f"unknown arithmetic {arithmetic!r}; expected 'real' or 'complex'")
+    # r^s_ab = (q_a − q_b)/(q_a + q_b), r^p_ab = (ε_b q_a − ε_a q_b)/(ε_b q_a + ε_a q_b)
+    if arithmetic == "real":  # real amplitudes, `fresnel.safe_div`'s real division
+        def _cdiv(nr, ni, dr, di):  # noqa: F811  (the imaginary parts are zeros here)
+            dz = dr == 0
+            return jnp.where(dz, 0.0, nr / jnp.where(dz, 1.0, dr)), zero
+    else:
+        _cdiv = _complex_div
+    r12 = (_cdiv(q1 - q2r, -q2i, q1 + q2r, q2i),
+           _cdiv(eps2 * q1 - eps1 * q2r, -eps1 * q2i, eps2 * q1 + eps1 * q2r, eps1 * q2i))
+    e3q2 = (e3r * q2r - e3i * q2i, e3r * q2i + e3i * q2r)
+    r23 = (_cdiv(q2r - q3r, q2i - q3i, q2r + q3r, q2i + q3i),
+           _cdiv(e3q2[0] - eps2 * q3r, e3q2[1] - eps2 * q3i,
+                 e3q2[0] + eps2 * q3r, e3q2[1] + eps2 * q3i))
+    evanescent = q2i > 0
+    c0, amp, zr, zi = [], [], [], []
+    for (a12, b12), (a23, b23) in zip(r12, r23):
+        R12 = a12 * a12 + b12 * b12
+        R23 = a23 * a23 + b23 * b23
+        # as `series_terms`: T₁₂₁, T₂₃ clamped at 0, TIR at 1|2 (evanescent film) exact
+        T = jnp.where(evanescent, 0.0, jnp.maximum(1.0 - R12, 0.0))
+        T23 = jnp.maximum(1.0 - R23, 0.0)
+        den = T + R12 * T23
+        dz = den == 0
+        rstar = jnp.where(dz, 0.0, T * T * R23 / jnp.where(dz, 1.0, den))
+        c0.append(R12 + rstar)
+        amp.append(rstar - T)
+        zr.append(jnp.where(evanescent, 0.0, -(a12 * a23 - b12 * b23)))
+        zi.append(jnp.where(evanescent, 0.0, -(a12 * b23 + b12 * a23)))
+    return FusedTerms(tuple(c0), tuple(amp), tuple(zr), tuple(zi), 2.0 * d * q2r)

@@ -127,6 +127,12 @@ def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None 
     if cfg.stability:
         log("stability report", verbose)
         result["stability"] = write_stability_report(out / "stability_report.md")
+    if cfg.name != "tiny":  # kernel_bench.json / .md: XLA cost and time per shading point
+        from .kernel_bench import run_kernel_bench
+
+        small = cfg.name == "quick"
+        result["kernels"] = run_kernel_bench(out, points=4096 if small else 65536,
+                                             repeats=3 if small else 7, verbose=verbose)
     result["seconds_total"] = time.perf_counter() - t_start
     title = (f"thinfilm_jax {cfg.name} benchmark on {', '.join(env['devices'])} "
              f"({env['cpu_count']} CPUs, load {env['load_average'][0]:.1f} at start); "

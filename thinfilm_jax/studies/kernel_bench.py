@@ -1,0 +1,260 @@
+"""Real-time kernels against the machine: XLA cost per shading point and warm time.
+
+For each real-time kernel (`kernels.filtered_kernel`, `kernels.ideal_kernel`,
+`improved.improved_kernel`, all with Ŝ from the LUT, and `envmap_radiance` with
+method ideal / filtered / improved on a prefiltered map), float32, `points` shading points:
+
+* XLA's cost analysis of the compiled program (`jax.jit(f).lower(...).compile()
+  .cost_analysis()`): flops, transcendentals and bytes accessed, per point. Deterministic
+  for a given jax/XLA version: the lead figures.
+* the warm time per point: calls interleaved over every program (old and new), the minimum
+  of `repeats` kept (the machine is shared; the minimum is the least disturbed run), compile
+  time (first call − warm) apart;
+* the fraction of the elementwise peak: flops per second of the kernel against a fused
+  float32 multiply-add loop over 2²⁰ values measured in the same run, same repeats.
+
+With a baseline checkout (``--baseline PATH``, a folder holding an older ``thinfilm_jax``
+package, e.g. a ``git worktree`` of an earlier commit) its kernels are loaded under another
+module name and timed interleaved with the current ones: before/after in one run. Writes
+``kernel_bench.json`` and ``kernel_bench.md``. Timings never assert anything.
+
+Run: ``python -m thinfilm_jax.studies.kernel_bench [--out figures] [--quick]
+[--baseline /path/to/old/checkout] [--repeats N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._io import atomic_write, write_json
+from ._timing import environment, jsonable, log
+
+F32 = jnp.float32
+PEAK_VALUES = 2**20
+PEAK_DEPTH = 64  # fused multiply-adds per value in the peak loop
+KERNELS = ("filtered_kernel", "ideal_kernel", "improved_kernel", "envmap ideal",
+           "envmap filtered", "envmap improved")
+
+
+def load_package(path, alias: str = "thinfilm_jax_baseline"):
+    """The ``thinfilm_jax`` package under folder `path`, imported as module `alias`."""
+    root = Path(path) / "thinfilm_jax"
+    spec = importlib.util.spec_from_file_location(alias, root / "__init__.py",
+                                                  submodule_search_locations=[str(root)])
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[alias] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _commit(path) -> str | None:
+    try:
+        return subprocess.run(["git", "-C", str(path), "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, timeout=10).stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def shading_points(n: int, seed: int = 0):
+    """`n` float32 shading points on a wide grid: films (d ∈ [0, 1000] nm, η₂ ∈ [1.2, 2.4],
+    absorbing bases), views θ_o ∈ [0°, 85°], α ∈ [0.02, 0.8], and the light moments of
+    the uniform-light lobe (`kernels.lobe_moments` on a 16 × 8 (θ_o, α) grid, nearest node)."""
+    from ..kernels import lobe_moments
+
+    rng = np.random.default_rng(seed)
+    tg, ag = np.linspace(0.0, np.radians(85.0), 16), np.linspace(0.02, 0.8, 8)
+    _, mean, cov = (np.asarray(x) for x in lobe_moments(tg[:, None], ag[None, :],
+                                                        quadrature=(16, 16)))
+    it, ia = rng.integers(0, 16, n), rng.integers(0, 8, n)
+    wo = np.stack([np.sin(tg[it]), np.zeros(n), np.cos(tg[it])], -1)
+    film = (rng.uniform(0, 1000, n), rng.uniform(1.2, 2.4, n), rng.uniform(1.0, 2.5, n),
+            rng.uniform(0.0, 3.0, n), np.ones(n))
+    return dict(film=tuple(jnp.asarray(x, F32) for x in film), wo=jnp.asarray(wo, F32),
+                mean=jnp.asarray(mean[it, ia], F32), cov=jnp.asarray(cov[it, ia], F32),
+                cos_o=jnp.asarray(wo[:, 2], F32), alpha=jnp.asarray(ag[ia], F32),
+                normal=jnp.asarray(np.tile([0.0, 0.0, 1.0], (n, 1)), F32))
+
+
+def programs(pkg, pts, pref_np, envmap: bool = True):
+    """{kernel name: (jitted callable, args)} of package `pkg` (this one or a baseline)."""
+    K = importlib.import_module(pkg.__name__ + ".kernels")
+    I = importlib.import_module(pkg.__name__ + ".improved")  # noqa: E741
+    L = importlib.import_module(pkg.__name__ + ".lut")
+    film = pkg.Film(*pts["film"])
+    lut = L.build_shat_lut(dtype=F32)
+    tab = I.bin_table(dtype=F32)
+    out = {
+        "filtered_kernel": (jax.jit(lambda f, w, m, c, lt: K.filtered_kernel(
+            f, w, m, c, shat="lut", lut=lt)), (film, pts["wo"], pts["mean"], pts["cov"], lut)),
+        "ideal_kernel": (jax.jit(lambda f, c, lt: K.ideal_kernel(f, c, shat="lut", lut=lt)),
+                         (film, pts["cos_o"], lut)),
+        "improved_kernel": (jax.jit(lambda f, c, a, tb, lt: I.improved_kernel(
+            f, c, a, tb, shat="lut", lut=lt)), (film, pts["cos_o"], pts["alpha"], tab, lut)),
+    }
+    if envmap:
+        P = importlib.import_module(pkg.__name__ + ".prefilter")
+        ibl = importlib.import_module(pkg.__name__ + ".ibl")
+        pref = P.PrefilteredEnvMap(*(jnp.asarray(x, F32) for x in pref_np[:4]),
+                                   L.ShatLUT(*pref_np[4]))
+        for method in ("ideal", "filtered", "improved"):
+            out[f"envmap {method}"] = (
+                jax.jit(lambda f, a, n, v, p, m=method: ibl.envmap_radiance(
+                    f, a, n, v, p, method=m)),
+                (film, pts["alpha"], pts["normal"], pts["wo"], pref))
+    return out
+
+
+def cost_per_point(fn, args, n: int) -> dict:
+    """XLA's cost analysis of the compiled `fn(*args)`, divided by the point count."""
+    ca = fn.lower(*args).compile().cost_analysis()
+    ca = ca[0] if isinstance(ca, list) else ca
+    return {"flops": ca.get("flops", 0.0) / n, "transcendentals":
+            ca.get("transcendentals", 0.0) / n, "bytes_accessed": ca.get("bytes accessed",
+                                                                          0.0) / n}
+
+
+def peak_program():
+    """A fused float32 multiply-add chain over 2²⁰ values (one XLA loop): the elementwise
+    peak of the machine. Returns (callable, args, flops per call)."""
+    def f(x, a, b):
+        for _ in range(PEAK_DEPTH):
+            x = x * a + b
+        return x
+
+    x = jnp.linspace(0.0, 1.0, PEAK_VALUES, dtype=F32)
+    return jax.jit(f), (x, F32(0.999), F32(1e-3)), 2.0 * PEAK_DEPTH * PEAK_VALUES
+
+
+def _timed(fn, args) -> float:
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(*args))
+    return time.perf_counter() - t0
+
+
+def run_kernel_bench(out="figures", *, points: int = 65536, repeats: int = 7,
+                     baseline=None, envmap: bool = True, verbose: bool = True) -> dict:
+    """Measure every kernel (module docstring) and write kernel_bench.json / .md in `out`."""
+    import thinfilm_jax as current
+
+    from ..prefilter import prefilter_envmap
+
+    out = Path(out)
+    env = environment()
+    log(f"kernel bench: {points} float32 points, {repeats} interleaved repeats", verbose)
+    pts = shading_points(points)
+    pref_np = None
+    if envmap:
+        pref = prefilter_envmap("venice_sunset").astype(F32)
+        pref_np = (*pref[:4], tuple(pref.lut))
+    versions = {"new": programs(current, pts, pref_np, envmap)}
+    if baseline is not None:
+        versions["old"] = programs(load_package(baseline), pts, pref_np, envmap)
+    peak_fn, peak_args, peak_flops = peak_program()
+    rows, timed = [], []
+    for version, progs in versions.items():
+        for name, (fn, args) in progs.items():
+            cost = cost_per_point(fn, args, points)
+            first = _timed(fn, args)  # compile + run
+            row = {"kernel": name, "version": version, **cost, "first_call_s": first}
+            rows.append(row)
+            timed.append((row, fn, args))
+            log(f"  {version} {name}: {cost['bytes_accessed']:.0f} B/point", verbose)
+    peak_times = []
+    _timed(peak_fn, peak_args)
+    for _ in range(repeats):  # interleaved: every program once per round, the peak loop too
+        peak_times.append(_timed(peak_fn, peak_args))
+        for row, fn, args in timed:
+            row.setdefault("times_s", []).append(_timed(fn, args))
+    peak = peak_flops / min(peak_times)
+    for row in rows:
+        t = min(row["times_s"])
+        row["ns_per_point"] = t / points * 1e9
+        row["ns_per_point_median"] = float(np.median(row["times_s"])) / points * 1e9
+        row["compile_s"] = max(row["first_call_s"] - t, 0.0)
+        row["gflops_per_s"] = row["flops"] * points / t / 1e9
+        row["fraction_of_peak"] = row["flops"] * points / t / peak
+    speedup = {}
+    if baseline is not None:
+        by = {(r["kernel"], r["version"]): r for r in rows}
+        for name in versions["new"]:
+            o, n = by.get((name, "old")), by.get((name, "new"))
+            if o and n:
+                speedup[name] = {"time": o["ns_per_point"] / n["ns_per_point"],
+                                 "bytes": o["bytes_accessed"] / n["bytes_accessed"]}
+    result = {"environment": env, "points": points, "repeats": repeats,
+              "baseline": None if baseline is None else {"path": str(baseline),
+                                                         "commit": _commit(baseline)},
+              "current_commit": _commit(Path(current.__file__).parent.parent),
+              "peak_gflops_per_s": peak / 1e9,
+              "peak_loop": f"{PEAK_DEPTH} fused float32 multiply-adds over {PEAK_VALUES} "
+                           "values, minimum of the same interleaved repeats",
+              "rows": [{k: v for k, v in r.items() if k != "times_s"} for r in rows],
+              "speedup_old_over_new": speedup}
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "kernel_bench.json", jsonable(result))
+    text = report_markdown(result)
+    atomic_write(out / "kernel_bench.md", lambda tmp: Path(tmp).write_text(text))
+    if verbose:
+        print(text)
+    return result
+
+
+def report_markdown(result: dict) -> str:
+    """The table: cost analysis first (deterministic), then the warm times."""
+    env = result["environment"]
+    lines = ["## Real-time kernels: XLA cost and warm time per shading point", "",
+             f"{result['points']} float32 shading points; {env['devices']}, "
+             f"{env['cpu_count']} CPUs, load average at start {env['load_average']}, "
+             f"jax {env['jax']}, {env['date']}. Cost: XLA cost analysis of the compiled "
+             "program (deterministic). Time: minimum of "
+             f"{result['repeats']} interleaved warm calls (median in brackets; a shared, "
+             f"noisy machine). Elementwise peak in the same run: "
+             f"{result['peak_gflops_per_s']:.1f} GFLOP/s ({result['peak_loop']}).", ""]
+    if result["baseline"]:
+        lines += [f"old: {result['baseline']['path']} (commit {result['baseline']['commit']});"
+                  f" new: commit {result['current_commit']}.", ""]
+    lines += ["| kernel | version | flops / pt | transcendentals / pt | bytes / pt "
+              "| ns / pt | compile s | GFLOP/s | fraction of peak |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in sorted(result["rows"], key=lambda r: (KERNELS.index(r["kernel"]), r["version"])):
+        lines.append(f"| {r['kernel']} | {r['version']} | {r['flops']:.0f} "
+                     f"| {r['transcendentals']:.1f} | {r['bytes_accessed']:.0f} "
+                     f"| {r['ns_per_point']:.0f} ({r['ns_per_point_median']:.0f}) "
+                     f"| {r['compile_s']:.1f} | {r['gflops_per_s']:.2f} "
+                     f"| {r['fraction_of_peak']:.3f} |")
+    if result["speedup_old_over_new"]:
+        lines += ["", "Old / new: " + "; ".join(
+            f"{k}: time {v['time']:.1f}×, bytes {v['bytes']:.1f}×"
+            for k, v in result["speedup_old_over_new"].items())]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="figures", help="output folder (default: figures)")
+    p.add_argument("--quick", action="store_true", help="4096 points, 3 repeats")
+    p.add_argument("--points", type=int, default=65536)
+    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--baseline", help="folder of an older checkout to time against")
+    p.add_argument("--no-envmap", action="store_true", help="the per-point kernels only")
+    args = p.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)
+    points, repeats = (4096, 3) if args.quick else (args.points, args.repeats)
+    run_kernel_bench(args.out, points=points, repeats=repeats, baseline=args.baseline,
+                     envmap=not args.no_envmap)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

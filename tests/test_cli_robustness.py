@@ -1,4 +1,4 @@
-"""The command line at its boundary (issue 12 §1.6–1.8): bad input is a one-line error found
+"""The command line at its boundary: bad input is a one-line error found
 before any work, never a traceback; outputs are never the input, never partial."""
 
 import json

@@ -1,4 +1,4 @@
-"""Fitting film parameters to patch colours and spectra (issue 5, SPEC §8).
+"""Fitting film parameters to patch colours and spectra (SPEC §8).
 
 Synthetic data come from the converged reference (`patch_radiance`, quadrature 48 × 48);
 the fits use their own, smaller quadrature (16 × 16, ~1e-5 from converged), so
@@ -32,7 +32,7 @@ SPEC_FILM = Film(812.3, 1.46, 3.9, 0.02)
 LAMBDA = np.arange(400.0, 800.1, 5.0)
 COS = np.cos(np.deg2rad([0.0, 30.0, 60.0]))
 
-# Acceptance tolerances (issue 5).
+# Acceptance tolerances (README, fitting).
 TOL_D_PATCH = 1.0  # nm
 TOL_ETA = 0.01
 TOL_D_SPECTRUM = 0.5  # nm

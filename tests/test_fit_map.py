@@ -1,4 +1,4 @@
-"""Thickness maps (`thinfilm_jax.fit_map`, issue #13 §3): recovery of a synthetic oxide /
+"""Thickness maps (`thinfilm_jax.fit_map`): recovery of a synthetic oxide /
 soap wedge rendered by the library, the neighbour prior against fringe-order outliers, input
 checks and the ``thinfilm-jax fit-map`` command.
 

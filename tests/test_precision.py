@@ -1,4 +1,4 @@
-"""Every matrix contraction of the public float32 paths states precision=HIGHEST (issue 12 §2).
+"""Every matrix contraction of the public float32 paths states precision=HIGHEST (GPUs default to TF32).
 
 GPUs run float32 `dot_general` in TF32 by default; the library states the precision of each
 contraction instead. The check traces on the CPU (`tests/_precision.py`), so it runs

@@ -120,7 +120,7 @@ def test_checks_are_skipped_under_jit_and_errors_not_raised_on_tracers():
         tf.airy_reflectance(FILM._replace(thickness=-5.0), 0.5, 550.0)
 
 
-# ------------------------------------------------------------------- issue 12, section 1
+# ------------------------------------------------------------------- input checks at the public boundary
 def _airy_numpy(d, n2, n3, cos1, lam, n1=1.0):
     """Independent textbook Airy sum (complex Snell, s and p) in NumPy complex128."""
     s2 = (n1 * n1) * (1.0 - cos1 * cos1)

@@ -12,7 +12,7 @@ float32 (every contraction states its precision).
   the light direction: μ_c = ⟨ω_o, μ_ω⟩, σ_c² = ω_oᵀ Σ_ω ω_o (K 20–21); μ_D, σ_D by the
   Taylor chain (K 25–28); C*_m, φ₂* at cos θ₁* = √((1 + μ_c)/2) (K 22); Ŝ(μ, σ²) from the
   LUT, the exact quadrature or the Gaussian fit.
-* `improved_kernel` — this library's improved model (issue 11, `improved`): K 29 per
+* `improved_kernel` — this library's improved model (`improved`, docs/improved.md): K 29 per
   equal-probability bin of cos θ₁, the bins read from a (θ_o, α) table (`bin_table`);
   `envmap_radiance` calls it through `improved.improved_envmap`.
 * `lobe_moments` — exact A(θ_o, α), μ_ω, Σ_ω of p_R ∝ ρ̃ ⟨n, ω_i⟩ (K 12, uniform light) in

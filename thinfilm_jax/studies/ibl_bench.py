@@ -157,7 +157,7 @@ OPTION_VARIANTS = (
     ("filtered, 32×64 prefilter", dict(resolution=(32, 64)), dict(method="filtered")),
     ("filtered, 9 levels", dict(levels=9), dict(method="filtered")),
     ("filtered, 33 levels", dict(levels=33), dict(method="filtered")),
-    ("improved (issue 11: bins of cos θ₁, P at the lobe's mean direction)", {},
+    ("improved (bins of cos θ₁, P at the lobe's mean direction)", {},
      dict(method="improved")),
 )
 

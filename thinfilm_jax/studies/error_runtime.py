@@ -161,7 +161,7 @@ def _shading_extras(cfg, run, rgb, film, c, film32, c32, names, ref, m32):
         run(rgb(method="spectral", arithmetic=arith), (fd, cd), f"spectral, {arith} arithmetic",
             "dielectric subset", {"arithmetic": arith, "grid": "dielectric materials"}, np.float64,
             ref_d, n_eval=int(diel.sum()), sel=diel)
-        run(rgb(method="fourier", terms=m32, arithmetic=arithmetic), (fd, cd),
+        run(rgb(method="fourier", terms=m32, arithmetic=arith), (fd, cd),
             f"Fourier M={m32}, {arith} arithmetic", "dielectric subset",
             {"arithmetic": arith, "terms": m32, "grid": "dielectric materials"}, np.float64, ref_d,
             n_eval=int(diel.sum()), sel=diel)

@@ -593,6 +593,11 @@ def _spec_rows():
     }
 
 
+def _ibl_reference_rate(kind: str, alpha: str) -> float:
+    """Points/s of the `kind` reference row of ibl_bench.json at α = `alpha`."""
+    return next(r["points_per_s"] for r in artifact("ibl_bench.json")["throughput"]
+                if r["name"].startswith(f"reference, {kind} ") and f"α = {alpha}," in r["name"])
+
 def _bench_load():
     return [artifact("bench.json")["environment"]["cpu_count"],
             artifact("bench.json")["environment"]["load_average"][0]]
@@ -605,10 +610,10 @@ SPECS = [
     Verbatim("| real-time option (", ("ibl_bench.json",), _ibl_markdown),
     Sentence(r"`filtered` costs \*\*(\S+)×\*\* `ideal` per shading point", ("ibl_bench.json",),
              lambda: [_ibl_vs_ideal("filtered (LUT)")]),
-    Sentence(r"R_jk table: (\S+) points/s on this 2-core CPU for a 128 × 256 map at α ≥ 0.2",
-             ("ibl_bench.json",), lambda: [next(
-                 r["points_per_s"] for r in artifact("ibl_bench.json")["throughput"]
-                 if r["name"].startswith("reference"))]),
+    Sentence(r"adaptive (\S+) / (\S+) / (\S+) points/s at α = 0.05 /\s+0.25 / 0.6 against "
+             r"(\S+) / (\S+) / (\S+) for the exhaustive rule", ("ibl_bench.json",),
+             lambda: [_ibl_reference_rate(kind, a) for kind in ("adaptive", "exhaustive")
+                      for a in ("0.05", "0.25", "0.6")]),
     Table("| ΔE₀₀ vs reference (mean / p95) |", ("improved.json",), 1, _improved_rows),
     Sentence(r"keeps the p95 at (\S+)–(\S+) against (\S+)–(\S+):", ("improved.json",),
              _improved_drakensberg),
@@ -648,7 +653,7 @@ SPECS = [
              ("bench.json",), _bench_load),
     Table("| path | ΔE₀₀ p95 | ΔE₀₀ max | µs / evaluation |", ("bench.json",), 1, _evr_rows),
     Sentence(r"no small M converges; below 80° ΔE max < 1 needs M = (\d+) \(tabulated Ŝ\)",
-             ("bench.json",), lambda: [artifact("bench.json")["m_selection"]["tabulated"][
+             ("bench.json",), lambda: [artifact("bench.json")["m_selection"]["exact"][
                  "smallest_M_dE_max_below_1_theta_le_80deg"]]),
     Verbatim("| grid | airy value µs |", ("peers.json",), _peers_markdown),
     Sentence(r"`thin_film_tmm` disagrees with `tmm` by up to (\S+) for absorbing", ("peers.json",),

@@ -73,7 +73,7 @@ def test_error_vs_runtime_notebook(tmp_path):
     rows = s["rows"]
     assert rows["spectral (reference)"]["dE_max"] == 0
     assert all(r["finite"] for r in rows.values())
-    m = s["m_selection"]["tabulated"]
+    m = s["m_selection"]["exact"]  # the 89-λ tabulated Ŝ
     p95 = np.array(m["dE_p95"])[: 11]
     assert m["M"][:11] == list(range(11)) and np.all(np.diff(p95) < 0), p95
     quad = [rows[f"reference quadrature {n}²"]["dE_max"] for n in (8, 16, 24, 32, 48, 64)]

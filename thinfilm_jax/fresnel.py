@@ -54,14 +54,13 @@ def safe_sqrt(x: Array) -> Array:
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
-def sqrt_upper(z: Array) -> Array:
-    r"""Complex √z on the branch Im ≥ 0, finite gradient at z = 0 (double-where).
+def sqrt_upper_parts(x: Array, y: Array) -> tuple[Array, Array]:
+    r"""(Re, Im) of √(x + iy) on the branch Im ≥ 0, finite gradient at 0 (double-where).
 
-    Written on (x, y) = (Re z, Im z), which XLA:CPU fuses with its neighbours (its own
-    complex square root is several separate loops): with t = √((|z| + |x|)/2) ≥ √(|z|/2) (no
-    cancellation), √z = ±t + i|y|/(2t) for x ≥ 0 (sign of y), and y/(2t) + it for x < 0.
+    Written on real parts, which XLA:CPU fuses with its neighbours (its own complex square
+    root is several separate loops): with t = √((|z| + |x|)/2) ≥ √(|z|/2) (no cancellation),
+    √z = ±t + i|y|/(2t) for x ≥ 0 (sign of y), and y/(2t) + it for x < 0.
     """
-    x, y = jnp.real(z), jnp.imag(z)
     zero = (x == 0) & (y == 0)
     x = jnp.where(zero, 1.0, x)
     t = jnp.sqrt(0.5 * (jnp.hypot(x, y) + jnp.abs(x)))
@@ -69,7 +68,12 @@ def sqrt_upper(z: Array) -> Array:
     right = x >= 0
     re = jnp.where(right, jnp.where(y < 0, -t, t), h)
     im = jnp.where(right, jnp.abs(h), t)
-    return jax.lax.complex(jnp.where(zero, 0.0, re), jnp.where(zero, 0.0, im))
+    return jnp.where(zero, 0.0, re), jnp.where(zero, 0.0, im)
+
+
+def sqrt_upper(z: Array) -> Array:
+    """Complex √z on the branch Im ≥ 0, finite gradient at z = 0 (`sqrt_upper_parts`)."""
+    return jax.lax.complex(*sqrt_upper_parts(jnp.real(z), jnp.imag(z)))
 
 
 def complex_dtype(*xs):

@@ -38,7 +38,7 @@ from jax import Array
 from . import _validate as V
 from .airy import sincos_turns
 from .film import Film
-from .fresnel import as_complex, film_interfaces, safe_div
+from .fresnel import as_complex, film_interfaces, safe_div, sqrt_upper_parts
 
 
 class SeriesTerms(NamedTuple):
@@ -155,18 +155,6 @@ def _complex_div(nr, ni, dr, di):
             jnp.where(zero, 0.0, (ni * dr - nr * di) * k))
 
 
-def _csqrt_upper(x, y):
-    """`fresnel.sqrt_upper` of x + iy on real parts (branch Im ≥ 0, finite gradient at 0)."""
-    zero = (x == 0) & (y == 0)
-    x = jnp.where(zero, 1.0, x)
-    t = jnp.sqrt(0.5 * (jnp.hypot(x, y) + jnp.abs(x)))
-    h = 0.5 * y / t
-    right = x >= 0
-    re = jnp.where(right, jnp.where(y < 0, -t, t), h)
-    im = jnp.where(right, jnp.abs(h), t)
-    return jnp.where(zero, 0.0, re), jnp.where(zero, 0.0, im)
-
-
 class FusedTerms(NamedTuple):
     """`SeriesTerms` written for one fused loop: each polarisation its own array (no stacked
     axis, which XLA would materialise) and z on real parts. Tuples are (s, p)."""
@@ -198,9 +186,9 @@ def fused_terms(film: Film, cos_theta, *, arithmetic: str = "complex") -> FusedT
     elif arithmetic == "complex":
         # q₂ = √(η₂² − s²) on the upper branch: real or imaginary (`fresnel.sqrt_upper` of a
         # real argument); q₃ = √(ε₃ − s²) with ε₃ = (η₃ + iκ₃)²
-        q2r, q2i = _csqrt_upper(eps2 - s2, zero)
+        q2r, q2i = sqrt_upper_parts(eps2 - s2, zero)
         e3r, e3i = eta3 * eta3 - kappa3 * kappa3, 2.0 * eta3 * kappa3
-        q3r, q3i = _csqrt_upper(e3r - s2, e3i + zero)
+        q3r, q3i = sqrt_upper_parts(e3r - s2, e3i + zero)
     else:
         raise ValueError(f"unknown arithmetic {arithmetic!r}; expected 'real' or 'complex'")
     # r^s_ab = (q_a − q_b)/(q_a + q_b), r^p_ab = (ε_b q_a − ε_a q_b)/(ε_b q_a + ε_a q_b)

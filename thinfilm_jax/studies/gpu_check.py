@@ -101,20 +101,11 @@ def run_tests(budget_s: float, extra: list[str] | None = None) -> dict:
 
 
 def _timed(fn, repeats: int = 3) -> dict:
-    import jax
-    import numpy as np
+    from ._timing import time_call
 
-    t0 = time.perf_counter()
-    jax.block_until_ready(fn())
-    first = time.perf_counter() - t0
-    warm = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        warm.append(time.perf_counter() - t0)
-    w = float(np.median(warm))
-    return {"first_s": first, "warm_s": w, "min_s": float(min(warm)),
-            "compile_s": max(first - w, 0.0)}
+    _, t = time_call(fn, (), repeats)
+    return {"first_s": t.first_s, "warm_s": t.warm_s, "min_s": t.min_s,
+            "compile_s": max(t.first_s - t.warm_s, 0.0)}
 
 
 def bench_airy(sizes) -> list[dict]:

@@ -9,7 +9,7 @@ The public face is this file; modules hold one concept each:
 (observers, Ŝ), `reflectance` (band R_j), `lut` (Ŝ(μ,σ²) table), `opd` (D distribution),
 `filtered` (K 29), `improved` (this library's improved real-time model, docs/improved.md: K 29
 per equal-probability bin of cos θ₁, `method="improved"`), `microfacet` (GGX/Smith, patch
-quadrature), `patch` (SPEC §7 methods),
+quadrature), `patch` (SPEC §7 methods), `sources` (suns split from a map, shaded apart),
 `colorimetry` (XYZ/sRGB/ΔE), `fit` (optimistix fits), `cli`. Studies and benchmarks
 (Figure 7, error vs run time, peers, specialisations, stability) live outside the core in
 `thinfilm_jax.studies`, which nothing here imports.
@@ -56,6 +56,8 @@ from .prefilter import PrefilteredEnvMap as PrefilteredEnvMap
 from .prefilter import prefilter_envmap as prefilter_envmap
 from .reflectance import rgb_reflectance as rgb_reflectance
 from .series import SeriesTerms as SeriesTerms
+from .sources import Sources as Sources
+from .sources import extract_sources as extract_sources
 from .series import series_terms as series_terms
 from .sharding import map_sharded as map_sharded
 from .sharding import shard_batch as shard_batch

@@ -58,12 +58,14 @@ from .lut import build_shat_lut
 from .options import ModelOptions, check_options
 from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered,
                         moments_to_mean_cov, prefilter_envmap)
+from .sources import source_radiance
 from .spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .uplift import cross_band_name
 
 METHODS = ("reference", "mc", "ideal", "filtered", "improved")
 REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST
+DEFAULT_SOURCES = 4  # suns split from a map that `improved` prefilters itself
 
 
 # ----------------------------------------------------------------------------- public
@@ -71,7 +73,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
                     observer: str = DEFAULT_OBSERVER, options: ModelOptions = REALTIME_OPTIONS,
                     cross_band: bool = True, subdivisions: int | None = None,
                     n_cos: int = 1024, n_samples: int = 4096, key=None,
-                    batch_size: int | None = None, max_height: int | None = 256) -> Array:
+                    batch_size: int | None = None, max_height: int | None = 256,
+                    sources: int | None = None) -> Array:
     """Band radiances L_j (..., J) of a film under an environment map (SPEC §9).
 
     Args:
@@ -96,6 +99,11 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
             `envmap.downsample` by a power of two while the texel stays ≤ α_min/8 and
             the map ≥ 128 rows) and warns; None integrates every texel
             (`ibl_reference.resample_factor`).
+        sources: when a real-time method prefilters an `EnvMap` here: split up to this
+            many compact bright sources (suns) and shade them apart (`sources`,
+            docs/improved.md). None: 4 for "improved", 0 for "ideal" and "filtered" (the
+            published method). A `PrefilteredEnvMap` carries its own split (it was made
+            by `prefilter_envmap(sources=...)`) and every real-time method shades it.
     Shading points with ⟨n, ω_o⟩ ≤ 0 give 0.
     """
     V.check_film(film)
@@ -130,7 +138,9 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
                              "not a PrefilteredEnvMap")
         pref = envmap
     elif realtime:
-        pref = prefilter_envmap(envmap, observer=observer)
+        if sources is None:
+            sources = DEFAULT_SOURCES if method == "improved" else 0
+        pref = prefilter_envmap(envmap, observer=observer, sources=sources)
     else:
         env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
     dtype = jnp.result_type(alpha, normal, view, *film, float)
@@ -172,6 +182,21 @@ def _realtime_jit(film, alpha, normal, view, pref, cfg, chunk):
 
 
 def _realtime_points(film, alpha, normal, view, pref, cfg):
+    """The map's method plus the sources split from it (if any), at flat shading points."""
+    method, observer, terms, shat, cross, arithmetic = cfg
+    out = _map_points(film, alpha, normal, view, pref, cfg)
+    pref = pref[0] if method == "improved" else pref
+    if pref.has_sources:
+        lut = pref.lut if cross else (build_shat_lut(observer, dtype=alpha.dtype)
+                                      if shat == "lut" else None)
+        out = out + source_radiance(film, alpha, normal, view, pref.sources,
+                                    observer=cross_band_name(observer) if cross else observer,
+                                    terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
+                                    cross_band=cross)
+    return out
+
+
+def _map_points(film, alpha, normal, view, pref, cfg):
     method, observer, terms, shat, cross, arithmetic = cfg
     if method == "improved":
         pref, table = pref

@@ -54,6 +54,7 @@ from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance
 from .fresnel import complex_dtype
 from .lut import ShatLUT, build_shat_lut
 from .microfacet import albedo, normal_distribution, smith_g2
+from .sources import Sources, extract_sources
 from .spectra import DEFAULT_OBSERVER, OBSERVERS
 from .uplift import cross_band_name
 
@@ -70,6 +71,8 @@ class PrefilteredEnvMap(NamedTuple):
         (x, y, z, xx, yy, zz, xy, yz, zx).
     albedo: (n_u, n_a) A(θ_o, α) on uniform grids of √cos θ_o and √α (`albedo_table`).
     lut: `ShatLUT` of the cross bands (J·3 bands).
+    sources: `sources.Sources` split from the map (`prefilter_envmap(sources=...)`), shaded
+        apart by every real-time method; the levels then hold the residual map. None: none.
     """
 
     sqrt_alpha: Array
@@ -77,6 +80,7 @@ class PrefilteredEnvMap(NamedTuple):
     moments: Array
     albedo: Array
     lut: ShatLUT
+    sources: Sources | None = None
 
     @property
     def per_channel(self) -> bool:
@@ -87,6 +91,10 @@ class PrefilteredEnvMap(NamedTuple):
         for the real-time paths."""
         cdt = complex_dtype(jnp.zeros((), dtype))
         return jax.tree.map(lambda x: x.astype(cdt if jnp.iscomplexobj(x) else dtype), self)
+
+    @property
+    def has_sources(self) -> bool:
+        return self.sources is not None and self.sources.count > 0
 
 
 def _features(d):
@@ -125,7 +133,8 @@ def _filter_level(alpha, rad, dirs, omega, out_dirs, lum, per_channel):
 
 def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 17,
                      resolution: tuple[int, int] | None = None, moments: str = "luminance",
-                     albedo_shape: tuple[int, int] = (64, 33), dtype=None) -> PrefilteredEnvMap:
+                     albedo_shape: tuple[int, int] = (64, 33), dtype=None,
+                     sources: int = 0) -> PrefilteredEnvMap:
     """Prefilter an `EnvMap` (or anything `load_envmap` reads) for the real-time methods.
 
     Args:
@@ -137,9 +146,17 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
         moments: "luminance" (K §3.2, 9 channels) or "per_channel" (27 channels).
         albedo_shape: nodes of the A table in √cos θ_o and in √α (`albedo_table`).
         dtype: float dtype of the tables (default: the map's).
+        sources: split up to this many compact bright sources (suns) from the map at its
+            full resolution (`sources.extract_sources`, defaults there) and prefilter the
+            residual; the real-time methods then shade the sources apart
+            (`sources.source_radiance`). 0 (default): the map as it is (the published
+            `filtered` method).
     Cost: Σ_levels h·w·N_l kernel evaluations (N_l input texels of level l), host-side once.
     """
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
+    found = None
+    if sources:
+        env, found = extract_sources(env, max_sources=sources)
     V.check_choice("observer", observer, OBSERVERS)
     V.check_choice("moments", moments, MOMENTS)
     big_h, big_w = env.shape
@@ -183,7 +200,8 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
     table = albedo_table(*albedo_shape)
     lut = build_shat_lut(cross_band_name(observer), dtype=dtype)
     return PrefilteredEnvMap(jnp.asarray(sqa, dtype), jnp.stack(rads), jnp.stack(moms),
-                             jnp.asarray(table, dtype), lut)
+                             jnp.asarray(table, dtype), lut,
+                             None if found is None else found.astype(dtype))
 
 
 @functools.cache

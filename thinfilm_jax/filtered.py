@@ -39,15 +39,20 @@ SHAT_SOURCES = ("exact", "lut", "gaussian")
 
 def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, terms: int = 2,
                    shat: str = "exact", lut: ShatLUT | None = None,
-                   arithmetic: str = "complex", interpolation: str = "cubic") -> Array:
+                   arithmetic: str = "complex", interpolation: str = "cubic",
+                   shat0: Array | None = None) -> Array:
     """K 29 band reflectance (..., J) for broadcast inputs (no validation; see patch.py).
+
+    `shat0`: Ŝ_j(0) (J,) of the C₀ term when `lut` holds bands that no observer name gives
+    (a light's colour folded into the cross bands, `sources.with_film_tables`); then
+    `observer` is not read.
 
     `interpolation` is the LUT read (`lut.lookup`) when shat="lut". With ``opd.std=None``
     the path is known to be exact (σ_D = 0, the `ideal` kernel): the LUT is read at σ = 0
     only."""
     if shat == "lut":
         return _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic,
-                          interpolation)
+                          interpolation, shat0)
     st = series_terms(film, cos_mean, arithmetic=arithmetic)
     dtype = jnp.result_type(cos_mean, float)
     mean, std = opd
@@ -60,7 +65,8 @@ def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, term
     return jnp.mean(fourier_band_reflectance(st, shat_m, terms, s0), axis=0)
 
 
-def _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic, interpolation):
+def _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic, interpolation,
+               shat0=None):
     r"""K 29 with Ŝ from the LUT as one elementwise program (XLA fuses it into one loop).
 
     The polarisation mean is taken before the bands: with W_m = Σ_{s,p} (R* − T₁₂₁) z^m
@@ -73,7 +79,7 @@ def _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic, interpolat
     dtype = jnp.result_type(cos_mean, float)
     ft = fused_terms(film, cos_mean, arithmetic=arithmetic)
     mean, std = opd
-    s0 = shat_at_zero(observer, dtype, "exact")
+    s0 = shat_at_zero(observer, dtype, "exact") if shat0 is None else shat0.astype(dtype)
     c0 = 0.5 * (ft.c0[0] + ft.c0[1])
     w = []  # W_m on real parts
     pr, pi = ft.z_re, ft.z_im  # z^m per polarisation

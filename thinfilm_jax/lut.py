@@ -48,7 +48,7 @@ from jax import Array
 
 from . import _validate as V
 from .fresnel import complex_dtype
-from .spectra import DEFAULT_OBSERVER, get_observer, shat_host
+from .spectra import DEFAULT_OBSERVER, Observer, get_observer, shat_host
 
 
 class ShatLUT(NamedTuple):
@@ -64,16 +64,14 @@ class ShatLUT(NamedTuple):
     sigma_max: Array
 
 
-def alias_free_path(observer: str = DEFAULT_OBSERVER) -> float:
+def alias_free_path(observer: str | Observer = DEFAULT_OBSERVER) -> float:
     """λ_min² / (2 max Δλ): the optical path beyond which the tabulated quadrature aliases."""
-    lam = get_observer(observer).wavelengths
+    lam = (observer if isinstance(observer, Observer) else get_observer(observer)).wavelengths
     return float(lam.min() ** 2 / (2.0 * np.diff(lam).max()))
 
 
-@functools.cache
-def _build(observer, d_mu, n_sigma, sigma_max, mu_max):
-    obs = get_observer(observer)
-    mu_max = alias_free_path(observer) if mu_max is None else float(mu_max)
+def _tabulate(obs, d_mu, n_sigma, sigma_max, mu_max):
+    mu_max = alias_free_path(obs) if mu_max is None else float(mu_max)
     n_mu = int(np.ceil(mu_max / d_mu)) + 1
     mu_max = (n_mu - 1) * d_mu
     d_sig = sigma_max / (n_sigma - 1)
@@ -86,21 +84,32 @@ def _build(observer, d_mu, n_sigma, sigma_max, mu_max):
     return table, carrier, mu_max, sigma_max
 
 
-def build_shat_lut(observer: str = DEFAULT_OBSERVER, *, d_mu: float = 25.0,
+@functools.cache
+def _build(observer, d_mu, n_sigma, sigma_max, mu_max):
+    return _tabulate(get_observer(observer), d_mu, n_sigma, sigma_max, mu_max)
+
+
+def build_shat_lut(observer: str | Observer = DEFAULT_OBSERVER, *, d_mu: float = 25.0,
                    n_sigma: int = 128, sigma_max: float = 1000.0, mu_max: float | None = None,
                    dtype=jnp.float64) -> ShatLUT:
     """Tabulate Ŝ_j(μ, σ²) once on the host; `dtype` float32 gives a complex64 table.
 
     Default resolution: Δμ = 25 nm, 128 σ samples on [0, 1000] nm (error in README).
+    `observer` is a name (plain or cross-band, `uplift`; tables cached per name) or an
+    `spectra.Observer` of other bands (e.g. a light's colour folded into the cross bands,
+    `sources.with_film_tables`; not cached).
     """
-    get_observer(observer)  # validates the name (plain or cross-band, see uplift)
+    named = isinstance(observer, str)
+    if named:
+        get_observer(observer)  # validates the name
     d_mu = float(V.check_range("d_mu", d_mu, 0.0, lo_open=True, why=" (nm)"))
     n_sigma = V.check_int("n_sigma", n_sigma, 2)
     sigma_max = float(V.check_range("sigma_max", sigma_max, 0.0, lo_open=True, why=" (nm)"))
     if mu_max is not None:
         mu_max = float(V.check_range("mu_max", mu_max, 0.0, lo_open=True, why=" (nm)"))
-    table, carrier, mmax, smax = _build(observer, float(d_mu), int(n_sigma), float(sigma_max),
-                                        mu_max)
+    build = _build if named else _tabulate
+    table, carrier, mmax, smax = build(observer, float(d_mu), int(n_sigma), float(sigma_max),
+                                       mu_max)
     cdt = complex_dtype(jnp.zeros((), dtype))
     return ShatLUT(jnp.asarray(table, cdt), jnp.asarray(carrier, dtype),
                    jnp.asarray(mmax, dtype), jnp.asarray(smax, dtype))

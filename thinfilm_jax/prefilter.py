@@ -54,7 +54,7 @@ from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance
 from .fresnel import complex_dtype
 from .lut import ShatLUT, build_shat_lut
 from .microfacet import albedo, normal_distribution, smith_g2
-from .sources import Sources, extract_sources
+from .sources import Sources, extract_sources, with_film_tables
 from .spectra import DEFAULT_OBSERVER, OBSERVERS
 from .uplift import cross_band_name
 
@@ -201,7 +201,8 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
     lut = build_shat_lut(cross_band_name(observer), dtype=dtype)
     return PrefilteredEnvMap(jnp.asarray(sqa, dtype), jnp.stack(rads), jnp.stack(moms),
                              jnp.asarray(table, dtype), lut,
-                             None if found is None else found.astype(dtype))
+                             None if found is None else
+                             with_film_tables(found, observer, dtype).astype(dtype))
 
 
 @functools.cache

@@ -28,8 +28,11 @@ axis × equally spaced φ; exact for the cap's area and its first and second dir
 moments), nodes below the horizon weigh 0; μ_s, Σ_s are the mean and covariance of the
 light direction under those weights, and R̄ is K 29 (`kernels.filtered_kernel`) of that
 small distribution: for a cap much smaller than the lobe it is the film term at the source's
-own half vector, and it filters the phase spread where the cap is not small. Cost per source
-and shading point: the nodes' D·G₂ (default 12) and one `filtered_kernel`.
+own half vector, and it filters the phase spread where the cap is not small. Each source's
+colour is folded into the bands once on the host (`with_film_tables`: a J-band Ŝ LUT of
+S_j Σ_k ĉ_k B_k), so the K 29 read costs what the plain `filtered_kernel` costs, not the
+J·3 cross bands. Cost per source and shading point: the nodes' D·G₂ (default 12) and one
+J-band K 29 evaluation.
 
 Example (a map that is a constant sky plus one bright texel: the split keeps every channel's
 ∫ L dω, and the source sits at that texel's centre):
@@ -61,20 +64,37 @@ from jax import Array
 
 from .envmap import EnvMap, load_envmap, luminance_weights, texel_centers, texel_solid_angles
 from .film import Film
-from .kernels import filtered_kernel
+from .filtered import filtered_bands
+from .fresnel import complex_dtype
+from .lut import ShatLUT, build_shat_lut
 from .microfacet import _g2_over_cos_o, normal_distribution
+from .opd import cos_incidence_from_projection, taylor_opd_moments
+from .spectra import Observer, get_observer
+from .uplift import cross_band_name
 
 #: (Gauss–Legendre nodes in cos ρ, equally spaced angles φ) of the cap rule
 DEFAULT_CAP_RULE = (2, 6)
 
 
+class FilmTable(NamedTuple):
+    """One source's colour folded into the cross bands: the Ŝ LUT of the J bands
+    S_j(λ) Σ_k ĉ_k B_k(λ) (ĉ = the source's RGB over its sum), their Ŝ_j(0) (J,), and the
+    sum of the RGB radiance (the scale ĉ left out)."""
+
+    lut: ShatLUT
+    shat0: Array
+    scale: Array
+
+
 class Sources(NamedTuple):
     """S spherical-cap sources (a pytree): world directions (S, 3) of the caps' axes, solid
-    angles Ω_s (S,) in sr, linear RGB radiance (S, 3) over each cap."""
+    angles Ω_s (S,) in sr, linear RGB radiance (S, 3) over each cap; `tables`: one
+    `FilmTable` per source (`with_film_tables`), or None (the cross-band LUT is read)."""
 
     direction: Array
     solid_angle: Array
     radiance: Array
+    tables: tuple[FilmTable, ...] | None = None
 
     @property
     def count(self) -> int:
@@ -85,7 +105,9 @@ class Sources(NamedTuple):
         return self.radiance * self.solid_angle[:, None]
 
     def astype(self, dtype) -> Sources:
-        return Sources(*(jnp.asarray(x, dtype) for x in self))
+        cdt = complex_dtype(jnp.zeros((), dtype))
+        return jax.tree.map(lambda x: jnp.asarray(x, cdt if jnp.iscomplexobj(x) else dtype),
+                            self)
 
 
 def no_sources(dtype=None) -> Sources:
@@ -191,6 +213,28 @@ def extract_sources(envmap, *, max_sources: int = 4, threshold: float = 0.02,
     return EnvMap(jnp.asarray(rad, dtype)), src
 
 
+def with_film_tables(sources: Sources, observer: str, dtype=None) -> Sources:
+    """`sources` with one `FilmTable` each for `observer`'s bands (host-side, ~0.3 s each).
+
+    Under a source of RGB radiance c, L_j = Σ_k R_jk c_k with R_jk linear in the band
+    weights S_j B_k; folding ĉ = c / Σc into the weights gives J bands S_j Σ_k ĉ_k B_k whose
+    K 29 reflectance, times Σc, is L_j: a J-band LUT read instead of J·3 (the cross bands)."""
+    dtype = dtype or sources.radiance.dtype
+    cross = get_observer(cross_band_name(observer))
+    base = get_observer(observer)
+    w = cross.weights.reshape(cross.weights.shape[0], base.n_bands, 3)  # (K, J, RGB)
+    tables = []
+    for rgb in np.asarray(sources.radiance, np.float64):
+        scale = float(rgb.sum())
+        chroma = rgb / scale if scale > 0 else np.full(3, 1.0 / 3.0)
+        weights = w @ chroma  # (K, J)
+        obs = Observer(f"{base.name}·source", base.wavelengths, weights, base.areas,
+                       base.band_names)
+        tables.append(FilmTable(build_shat_lut(obs, dtype=dtype),
+                                jnp.asarray(weights.sum(0), dtype), jnp.asarray(scale, dtype)))
+    return sources._replace(tables=tuple(tables))
+
+
 # ----------------------------------------------------------------------------- shading
 @functools.cache
 def cap_rule(n_cos: int, n_phi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -229,7 +273,7 @@ def cap_nodes(sources: Sources, rule: tuple[int, int] = DEFAULT_CAP_RULE):
 
 
 def _dot(a, b):
-    return jnp.sum(a * b, axis=-1)  # elementwise: no contraction, no TF32 on GPU
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]  # no contraction
 
 
 def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observer: str,
@@ -240,46 +284,69 @@ def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observ
 
     Args:
         film, alpha, normal, view: as `ibl.envmap_radiance` (broadcast shading points).
-        sources: `Sources` in the map's world frame.
-        observer: the band name the kernel reads (cross bands when `cross_band`).
-        terms, shat, lut, arithmetic: as `kernels.filtered_kernel`.
+        sources: `Sources` in the map's world frame; with `tables` (and shat="lut",
+            `cross_band`) each source reads its own J-band table, else the cross bands.
+        observer: the plain band name (the cross bands are read when `cross_band`).
+        terms, shat, lut, arithmetic: as `kernels.filtered_kernel`; `lut` holds the
+            bands read without tables (the cross bands when `cross_band`).
         cross_band: R_jk under the sources' RGB (SPEC §9) or the diagonal R_j L_j.
         rule: (n_cos, n_phi) of `cap_rule`.
     """
     shape = normal.shape[:-1]
-    n_bands = 3 if cross_band else None
+    n_bands = get_observer(observer).n_bands
     if sources.count == 0:
-        j = n_bands or (lut.table.shape[-1] if lut is not None else 3)
-        return jnp.zeros(shape + (j,), normal.dtype)
+        return jnp.zeros(shape + (n_bands,), normal.dtype)
     nodes, wts = cap_nodes(sources.astype(normal.dtype), rule)  # (S, Q, 3), (S, Q)
-    nrm = normal[..., None, None, :]
-    vw = view[..., None, None, :]
     cos_o = _dot(normal, view)
     up = cos_o > 0
-    co = jnp.where(up, cos_o, 1.0)[..., None, None]
-    ci = _dot(nrm, nodes)  # (..., S, Q)
-    hv = nodes + vw
-    hn2 = _dot(hv, hv)
-    lit = (ci > 0) & (hn2 > 0)
-    cos_h = _dot(nrm, hv) / jnp.sqrt(jnp.where(lit, hn2, 1.0))
-    a = jnp.asarray(alpha)[..., None, None]
-    cis = jnp.where(lit, ci, 0.0)
-    f = normal_distribution(cos_h, a) * _g2_over_cos_o(cis, co, a, "ggx") / 4
-    f = jnp.where(lit, f, 0.0) * wts  # ρ̃ ⟨n, ω_i⟩ dω per node
-    mass = jnp.sum(f, axis=-1)  # (..., S) lobe mass of each cap
-    has = mass > 0
-    p = f / jnp.where(has, mass, 1.0)[..., None]
-    p = jnp.where(has[..., None], p, 1.0 / p.shape[-1])  # a dark cap: its own centroid
-    mean = jnp.sum(p[..., None] * nodes, axis=-2)  # (..., S, 3)
-    dev = nodes - mean[..., None, :]
-    cov = jnp.sum(p[..., None, None] * dev[..., :, None] * dev[..., None, :], axis=-3)
-    f3 = Film(*(jnp.asarray(x)[..., None] for x in film))
-    r = filtered_kernel(f3, view[..., None, :], mean, cov, observer=observer, terms=terms,
-                        shat=shat, lut=lut, arithmetic=arithmetic)  # (..., S, J[·3])
-    light = sources.radiance.astype(normal.dtype)  # (S, 3)
-    if cross_band:
-        out = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * light[:, None, :], axis=-1)
-    else:
-        out = r * light
-    out = jnp.sum(out * mass[..., None], axis=-2)
+    co = jnp.where(up, cos_o, 1.0)
+    nx, ny, nz = (normal[..., i] for i in range(3))
+    vx, vy, vz = (view[..., i] for i in range(3))
+    mass, mu_c, var_c = [], [], []
+    # one elementwise program: the S × Q nodes unrolled on per-point arrays (a reduction
+    # over a short minor axis would be a loop of its own)
+    for s in range(sources.count):
+        fs, cs = [], []
+        for q in range(nodes.shape[1]):
+            dx, dy, dz = nodes[s, q, 0], nodes[s, q, 1], nodes[s, q, 2]
+            ci = nx * dx + ny * dy + nz * dz
+            hx, hy, hz = dx + vx, dy + vy, dz + vz
+            hn2 = hx * hx + hy * hy + hz * hz
+            lit = (ci > 0) & (hn2 > 0)
+            cos_h = (nx * hx + ny * hy + nz * hz) / jnp.sqrt(jnp.where(lit, hn2, 1.0))
+            f = (normal_distribution(cos_h, alpha)
+                 * _g2_over_cos_o(jnp.where(lit, ci, 0.0), co, alpha, "ggx") / 4)
+            fs.append(jnp.where(lit, f, 0.0) * wts[s, q])  # ρ̃ ⟨n, ω_i⟩ dω of the node
+            cs.append(vx * dx + vy * dy + vz * dz)  # c = ⟨ω_i, ω_o⟩
+        m = sum(fs[1:], fs[0])
+        has = m > 0
+        inv = jnp.where(has, 1.0 / jnp.where(has, m, 1.0), 0.0)
+        # p_q = f_q / m; a cap with no lit node: its plain centroid (the term is 0 anyway)
+        ps = [jnp.where(has, f * inv, 1.0 / len(fs)) for f in fs]
+        mu = sum((p * c for p, c in zip(ps[1:], cs[1:])), ps[0] * cs[0])
+        mu = jnp.where(mu > 1.0, 1.0, jnp.where(mu < -1.0, -1.0, mu))  # rounding only
+        var = sum((p * (c - mu) ** 2 for p, c in zip(ps[1:], cs[1:])), ps[0] * (cs[0] - mu) ** 2)
+        mass.append(m), mu_c.append(mu), var_c.append(var)
+    kw = dict(terms=terms, arithmetic=arithmetic)
+    if sources.tables is not None and shat == "lut" and cross_band:
+        out = None
+        for tab, m, mu, var in zip(sources.tables, mass, mu_c, var_c):  # K 29 per source
+            r = filtered_bands(film, cos_incidence_from_projection(mu),
+                               taylor_opd_moments(film, mu, var), None, shat="lut",
+                               lut=tab.lut, shat0=tab.shat0, **kw)
+            r = r * (tab.scale.astype(r.dtype) * m)[..., None]
+            out = r if out is None else out + r
+    else:  # the cross bands (or the plain ones, diagonal) for all sources at once
+        mass, mu_c, var_c = (jnp.stack(x, axis=-1) for x in (mass, mu_c, var_c))  # (..., S)
+        f3 = Film(*(jnp.asarray(x)[..., None] for x in film))
+        obs = cross_band_name(observer) if cross_band else observer
+        r = filtered_bands(f3, cos_incidence_from_projection(mu_c),
+                           taylor_opd_moments(f3, mu_c, var_c), obs, shat=shat, lut=lut,
+                           **kw)  # (..., S, J[·3])
+        light = sources.radiance.astype(normal.dtype)  # (S, 3)
+        if cross_band:
+            r = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * light[:, None, :], axis=-1)
+        else:
+            r = r * light
+        out = jnp.sum(r * mass[..., None], axis=-2)
     return jnp.where(up[..., None], out, 0.0)

@@ -2,7 +2,8 @@
 
 For each real-time kernel (`kernels.filtered_kernel`, `kernels.ideal_kernel`,
 `improved.improved_kernel`, all with Ŝ from the LUT, and `envmap_radiance` with
-method ideal / filtered / improved on a prefiltered map), float32, `points` shading points:
+method ideal / filtered / improved on a prefiltered map, and filtered / improved with one
+sun split from the map, `sources`), float32, `points` shading points:
 
 * XLA's cost analysis of the compiled program (`jax.jit(f).lower(...).compile()
   .cost_analysis()`): flops, transcendentals and bytes accessed, per point. Deterministic
@@ -51,7 +52,8 @@ F32 = jnp.float32
 PEAK_VALUES = 2**20
 PEAK_DEPTH = 64  # fused multiply-adds per value in the peak loop
 KERNELS = ("filtered_kernel", "ideal_kernel", "improved_kernel", "envmap ideal",
-           "envmap filtered", "envmap improved")
+           "envmap filtered", "envmap improved", "envmap filtered + 1 sun",
+           "envmap improved + 1 sun")
 
 
 def load_package(path, alias: str = "thinfilm_jax_baseline"):
@@ -119,6 +121,16 @@ def programs(pkg, pts, pref_np, envmap: bool = True):
                 jax.jit(lambda f, a, n, v, p, m=method: ibl.envmap_radiance(
                     f, a, n, v, p, method=m)),
                 (film, pts["alpha"], pts["normal"], pts["wo"], pref))
+        if importlib.util.find_spec(pkg.__name__ + ".sources") is not None:
+            S = importlib.import_module(pkg.__name__ + ".sources")
+            sun = S.Sources(jnp.asarray([[0.6, 0.0, 0.8]], F32), jnp.asarray([6e-5], F32),
+                            jnp.asarray([[5e4, 4.6e4, 4.1e4]], F32))  # one 0.5° sun
+            sun = S.with_film_tables(sun, "stiles_burch_1959_10", F32).astype(F32)
+            for method in ("filtered", "improved"):
+                out[f"envmap {method} + 1 sun"] = (
+                    jax.jit(lambda f, a, n, v, p, m=method: ibl.envmap_radiance(
+                        f, a, n, v, p, method=m)),
+                    (film, pts["alpha"], pts["normal"], pts["wo"], pref._replace(sources=sun)))
     return out
 
 

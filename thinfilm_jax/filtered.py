@@ -40,19 +40,29 @@ SHAT_SOURCES = ("exact", "lut", "gaussian")
 def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, terms: int = 2,
                    shat: str = "exact", lut: ShatLUT | None = None,
                    arithmetic: str = "complex", interpolation: str = "cubic",
-                   shat0: Array | None = None) -> Array:
+                   shat0: Array | None = None, light: Array | None = None) -> Array:
     """K 29 band reflectance (..., J) for broadcast inputs (no validation; see patch.py).
 
     `shat0`: Ŝ_j(0) (J,) of the C₀ term when `lut` holds bands that no observer name gives
     (a light's colour folded into the cross bands, `sources.with_film_tables`); then
     `observer` is not read.
 
+    `light` (..., K) with shat="lut" and a cross-band `observer` (`uplift`, J·K bands j·k):
+    returns Σ_k R_jk light_k (..., J), the band radiance under RGB light (SPEC §9), reading
+    the table one light channel at a time (K reads of J bands, which XLA fuses into the
+    kernel's loop; one read of J·K bands per tap does not fuse and moves ~8× the bytes).
+
     `interpolation` is the LUT read (`lut.lookup`) when shat="lut". With ``opd.std=None``
     the path is known to be exact (σ_D = 0, the `ideal` kernel): the LUT is read at σ = 0
     only."""
     if shat == "lut":
+        if light is not None:
+            return _lut_bands_under_light(film, cos_mean, opd, observer, terms, lut,
+                                          arithmetic, interpolation, light)
         return _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic,
                           interpolation, shat0)
+    if light is not None:
+        raise ValueError("filtered_bands: light= needs shat='lut' (the cross-band table)")
     st = series_terms(film, cos_mean, arithmetic=arithmetic)
     dtype = jnp.result_type(cos_mean, float)
     mean, std = opd
@@ -63,6 +73,22 @@ def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, term
 
     s0 = shat_at_zero(observer, dtype, "gaussian" if shat == "gaussian" else "exact")
     return jnp.mean(fourier_band_reflectance(st, shat_m, terms, s0), axis=0)
+
+
+def _lut_bands_under_light(film, cos_mean, opd, observer, terms, lut, arithmetic,
+                           interpolation, light):
+    """Σ_k light_k R_jk: the cross-band table split by light channel k (bands j·k, k
+    fastest), one J-band K 29 per channel; XLA shares the film terms between them."""
+    n_light = light.shape[-1]
+    s0 = shat_at_zero(observer, jnp.result_type(cos_mean, float), "exact")
+    out = None
+    for k in range(n_light):
+        lut_k = ShatLUT(lut.table[..., k::n_light], lut.carrier[k::n_light], lut.mu_max,
+                        lut.sigma_max)
+        r = _lut_bands(film, cos_mean, opd, observer, terms, lut_k, arithmetic,
+                       interpolation, s0[k::n_light]) * light[..., k:k + 1]
+        out = r if out is None else out + r
+    return out
 
 
 def _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic, interpolation,

@@ -216,6 +216,15 @@ def _map_points(film, alpha, normal, view, pref, cfg):
     lut = pref.lut if cross else None
     if shat == "lut" and not cross:  # the diagonal path reads the plain bands' table
         lut = build_shat_lut(observer, dtype=alpha.dtype)
+    per_light = cross and shat == "lut" and not pref.per_channel
+    if per_light:  # Σ_k R_jk P_k read per light channel (`filtered.filtered_bands`)
+        kw = dict(observer=obs, terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
+                  light=rad)
+        if method == "ideal":
+            out = ideal_kernel(film, co, **kw)
+        else:
+            out = filtered_kernel(film, view, *moments_to_mean_cov(mom), **kw)
+        return jnp.where(up[..., None], a[..., None] * out, 0.0)
     if method == "ideal":
         r = ideal_kernel(film, co, observer=obs, terms=terms, shat=shat, lut=lut,
                          arithmetic=arithmetic)

@@ -63,7 +63,7 @@ __all__ = ["ideal_kernel", "filtered_kernel", "improved_kernel", "bin_table", "l
 
 def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2,
                  shat: str = "exact", lut: ShatLUT | None = None,
-                 arithmetic: str = "complex") -> Array:
+                 arithmetic: str = "complex", light: Array | None = None) -> Array:
     """R_j(cos θ_o) by K 4 with M = `terms`, shape broadcast(film, cos_o) + (J,).
 
     Args:
@@ -75,17 +75,19 @@ def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2
             samples), "lut" (the Ŝ(μ, σ²) table read at σ = 0: K 29 with σ_D = 0) or
             "gaussian" (BB17's closed form).
         arithmetic: "complex" (complex η₃ + iκ₃) or "real" (κ₃ = 0 only).
+        light: (..., 3) RGB radiance with a cross-band observer and shat="lut": returns
+            Σ_k R_jk light_k (..., J) (`filtered.filtered_bands`), the table read per channel.
     """
     if shat == "lut":
         opd = OPDMoments(opd_of_cos(film, cos_o), None)  # σ_D = 0 exactly: the σ = 0 column
         return filtered_bands(film, cos_o, opd, observer, terms=terms, shat="lut", lut=lut,
-                              arithmetic=arithmetic)
+                              arithmetic=arithmetic, light=light)
     return fourier_bands(film, cos_o, observer, terms=terms, shat=shat, arithmetic=arithmetic)
 
 
 def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, terms: int = 2,
                     shat: str = "lut", lut: ShatLUT | None = None,
-                    arithmetic: str = "complex") -> Array:
+                    arithmetic: str = "complex", light: Array | None = None) -> Array:
     """K 29 band reflectance from light-direction moments, shape (..., J).
 
     Args:
@@ -94,12 +96,14 @@ def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, ter
         mean: μ_ω (..., 3), mean light direction of p_R (|μ_ω| ≤ 1).
         cov: Σ_ω (..., 3, 3), covariance of the light direction.
         shat: "lut" (needs `lut`), "exact" (SPEC §5 quadrature) or "gaussian" (closed form).
+        light: (..., 3) RGB radiance with a cross-band observer and shat="lut": returns
+            Σ_k R_jk light_k (..., J) (`filtered.filtered_bands`), the table read per channel.
     """
     mu_c, var_c = project_light_moments(wo, mean, cov)
     opd = taylor_opd_moments(film, mu_c, var_c)
     cos_star = cos_incidence_from_projection(mu_c)
     return filtered_bands(film, cos_star, opd, observer, terms=terms, shat=shat, lut=lut,
-                          arithmetic=arithmetic)
+                          arithmetic=arithmetic, light=light)
 
 
 @functools.partial(jax.jit, static_argnames=("quadrature", "ndf"))

@@ -23,15 +23,15 @@ $$ L_j \mathrel{+}= \sum_s \sum_k \bar R_{jk}(\mu_s, \Sigma_s)\, L_{s,k}\, m_s,\
    m_s = \int_{\mathrm{cap}_s} \tilde\rho\,\langle n,\omega_i\rangle\, d\omega_i
    \approx \sum_q w_q\, \frac{D(h_q)\, G_2}{4\cos\theta_o} $$
 
-The lobe mass m_s is a product rule on the cap (Gauss–Legendre in cos ρ from the cap's
-axis × equally spaced φ; exact for the cap's area and its first and second direction
-moments), nodes below the horizon weigh 0; μ_s, Σ_s are the mean and covariance of the
+The lobe mass m_s is a product rule on the cap (`cap_rule`: Gauss–Radau in cos ρ from the
+cap's axis × equally spaced φ, default the axis and a ring of 4; exact for the cap's area
+and its first and second direction moments), nodes below the horizon weigh 0; μ_s, Σ_s are the mean and covariance of the
 light direction under those weights, and R̄ is K 29 (`kernels.filtered_kernel`) of that
 small distribution: for a cap much smaller than the lobe it is the film term at the source's
 own half vector, and it filters the phase spread where the cap is not small. Each source's
 colour is folded into the bands once on the host (`with_film_tables`: a J-band Ŝ LUT of
 S_j Σ_k ĉ_k B_k), so the K 29 read costs what the plain `filtered_kernel` costs, not the
-J·3 cross bands. Cost per source and shading point: the nodes' D·G₂ (default 12) and one
+J·3 cross bands. Cost per source and shading point: the nodes' D·G₂ (default 5) and one
 J-band K 29 evaluation.
 
 Example (a map that is a constant sky plus one bright texel: the split keeps every channel's
@@ -72,8 +72,8 @@ from .opd import cos_incidence_from_projection, taylor_opd_moments
 from .spectra import Observer, get_observer
 from .uplift import cross_band_name
 
-#: (Gauss–Legendre nodes in cos ρ, equally spaced angles φ) of the cap rule
-DEFAULT_CAP_RULE = (2, 6)
+#: (rings, angles per ring) of the cap rule (`cap_rule`): the axis and one ring of 4, 5 nodes
+DEFAULT_CAP_RULE = (1, 4)
 
 
 class FilmTable(NamedTuple):
@@ -237,15 +237,27 @@ def with_film_tables(sources: Sources, observer: str, dtype=None) -> Sources:
 
 # ----------------------------------------------------------------------------- shading
 @functools.cache
-def cap_rule(n_cos: int, n_phi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t, φ, weight) of the product rule on a cap, t = (1 − cos ρ)/(1 − cos γ) ∈ (0, 1):
-    Gauss–Legendre in t (uniform in solid angle) × n_phi angles, rotated by half a step on
-    odd rings; weights sum to 1. Exact for the area and the first and second moments of ω."""
-    x, wx = np.polynomial.legendre.leggauss(n_cos)
-    t = np.repeat(0.5 * (x + 1), n_phi)
-    ring = np.repeat(np.arange(n_cos), n_phi)
-    phi = 2 * np.pi * (np.tile(np.arange(n_phi), n_cos) + 0.5 * (ring % 2)) / n_phi
-    return t, phi, np.repeat(0.5 * wx, n_phi) / n_phi
+def cap_rule(rings: int, n_phi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, φ, weight) of the product rule on a cap, t = (1 − cos ρ)/(1 − cos γ) ∈ [0, 1]
+    (uniform in solid angle): Gauss–Radau in t with its fixed node on the axis (t = 0, one
+    node) and `rings` rings of n_phi equally spaced angles (rotated by half a step on even
+    rings); weights sum to 1. rings = 1: t = 2/3, weights 1/4 and 3/4 (exact to degree 2
+    in cos ρ); rings = 2: degree 4. With n_phi ≥ 3 the cap's area and its first and second
+    direction moments are exact; the axis node catches a lobe narrower than the cap."""
+    if rings == 1:
+        t, w = np.array([0.0, 2.0 / 3.0]), np.array([0.25, 0.75])
+    elif rings == 2:
+        r6 = np.sqrt(6.0)
+        t = np.array([0.0, (6.0 - r6) / 10.0, (6.0 + r6) / 10.0])
+        w = np.array([1.0 / 9.0, (16.0 + r6) / 36.0, (16.0 - r6) / 36.0])
+    else:
+        raise ValueError(f"cap_rule: rings must be 1 or 2, got {rings!r}")
+    if not (isinstance(n_phi, int) and n_phi >= 3):
+        raise ValueError(f"cap_rule: n_phi must be an int >= 3, got {n_phi!r}")
+    ring = np.repeat(np.arange(1, rings + 1), n_phi)
+    phi = 2 * np.pi * (np.tile(np.arange(n_phi), rings) + 0.5 * (ring % 2 == 0)) / n_phi
+    return (np.concatenate([[0.0], np.repeat(t[1:], n_phi)]), np.concatenate([[0.0], phi]),
+            np.concatenate([[w[0]], np.repeat(w[1:], n_phi) / n_phi]))
 
 
 def _frame(axis):
@@ -290,7 +302,7 @@ def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observ
         terms, shat, lut, arithmetic: as `kernels.filtered_kernel`; `lut` holds the
             bands read without tables (the cross bands when `cross_band`).
         cross_band: R_jk under the sources' RGB (SPEC §9) or the diagonal R_j L_j.
-        rule: (n_cos, n_phi) of `cap_rule`.
+        rule: (rings, n_phi) of `cap_rule`.
     """
     shape = normal.shape[:-1]
     n_bands = get_observer(observer).n_bands
@@ -303,10 +315,13 @@ def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observ
     nx, ny, nz = (normal[..., i] for i in range(3))
     vx, vy, vz = (view[..., i] for i in range(3))
     mass, mu_c, var_c = [], [], []
-    # one elementwise program: the S × Q nodes unrolled on per-point arrays (a reduction
-    # over a short minor axis would be a loop of its own)
+    # one elementwise pass: the S × Q nodes unrolled on per-point arrays, running sums of
+    # f, f·δ, f·δ² with δ = c − c_axis (c = ⟨ω_i, ω_o⟩; the shift keeps the variance of a
+    # tiny cap free of cancellation); a reduction over a short node axis would be a loop
     for s in range(sources.count):
-        fs, cs = [], []
+        ax, ay, az = (sources.direction[s, i].astype(normal.dtype) for i in range(3))
+        c_axis = vx * ax + vy * ay + vz * az
+        m = m1 = m2 = None
         for q in range(nodes.shape[1]):
             dx, dy, dz = nodes[s, q, 0], nodes[s, q, 1], nodes[s, q, 2]
             ci = nx * dx + ny * dy + nz * dz
@@ -316,17 +331,18 @@ def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observ
             cos_h = (nx * hx + ny * hy + nz * hz) / jnp.sqrt(jnp.where(lit, hn2, 1.0))
             f = (normal_distribution(cos_h, alpha)
                  * _g2_over_cos_o(jnp.where(lit, ci, 0.0), co, alpha, "ggx") / 4)
-            fs.append(jnp.where(lit, f, 0.0) * wts[s, q])  # ρ̃ ⟨n, ω_i⟩ dω of the node
-            cs.append(vx * dx + vy * dy + vz * dz)  # c = ⟨ω_i, ω_o⟩
-        m = sum(fs[1:], fs[0])
+            f = jnp.where(lit, f, 0.0) * wts[s, q]  # ρ̃ ⟨n, ω_i⟩ dω of the node
+            delta = (vx * dx + vy * dy + vz * dz) - c_axis
+            fd = f * delta
+            m, m1, m2 = ((f, fd, fd * delta) if m is None else
+                         (m + f, m1 + fd, m2 + fd * delta))
         has = m > 0
-        inv = jnp.where(has, 1.0 / jnp.where(has, m, 1.0), 0.0)
-        # p_q = f_q / m; a cap with no lit node: its plain centroid (the term is 0 anyway)
-        ps = [jnp.where(has, f * inv, 1.0 / len(fs)) for f in fs]
-        mu = sum((p * c for p, c in zip(ps[1:], cs[1:])), ps[0] * cs[0])
+        inv = 1.0 / jnp.where(has, m, 1.0)
+        mean_d = jnp.where(has, m1 * inv, 0.0)  # a cap with no lit node: its axis (term 0)
+        var = jnp.where(has, m2 * inv - mean_d * mean_d, 0.0)
+        mu = c_axis + mean_d
         mu = jnp.where(mu > 1.0, 1.0, jnp.where(mu < -1.0, -1.0, mu))  # rounding only
-        var = sum((p * (c - mu) ** 2 for p, c in zip(ps[1:], cs[1:])), ps[0] * (cs[0] - mu) ** 2)
-        mass.append(m), mu_c.append(mu), var_c.append(var)
+        mass.append(m), mu_c.append(mu), var_c.append(jnp.where(var > 0, var, 0.0))
     kw = dict(terms=terms, arithmetic=arithmetic)
     if sources.tables is not None and shat == "lut" and cross_band:
         out = None

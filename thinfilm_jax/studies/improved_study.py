@@ -71,10 +71,12 @@ class StudyConfig:
     points: int = 100_000
     repeats: int = 7
     ibl: bool = True
+    held_out: bool = True  # the held-out sun maps (their references: a few minutes)
 
     @classmethod
     def quick(cls):
-        return cls(fig7_resolution=8, wide_quadrature=32, points=5_000, repeats=3)
+        return cls(fig7_resolution=8, wide_quadrature=32, points=5_000, repeats=3,
+                   held_out=False)
 
 
 def regions(theta_o, alpha):
@@ -591,7 +593,7 @@ def run(cfg: StudyConfig = StudyConfig(), out="figures", verbose=True) -> dict:
     ref = uni["wide"].pop("_values")["reference"]
     result = {"environment": env, "config": dataclasses.asdict(cfg), "uniform": uni}
     if cfg.ibl:
-        result["ibl"] = ibl_renders(verbose)
+        result["ibl"] = ibl_renders(verbose, held_out=cfg.held_out)
     result["kernels"] = kernel_rows(cfg, ref, verbose)
     write_json(out / "improved.json", jsonable(result))
     text = markdown(result)
@@ -612,6 +614,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="figures")
     p.add_argument("--quick", action="store_true", help="small grids (smoke test)")
     p.add_argument("--no-ibl", action="store_true", help="skip the IBL renders")
+    p.add_argument("--no-held-out", action="store_true",
+                   help="skip the held-out sun maps (their references take a few minutes)")
     p.add_argument("--floor", action="store_true",
                    help="only the IBL floor of split-sum methods (`ibl_floor`, ≈ 10 min): "
                         "writes improved_ibl_floor.json")
@@ -623,6 +627,8 @@ def main(argv=None) -> int:
     cfg = StudyConfig.quick() if args.quick else StudyConfig()
     if args.no_ibl:
         cfg = dataclasses.replace(cfg, ibl=False)
+    if args.no_held_out:
+        cfg = dataclasses.replace(cfg, held_out=False)
     run(cfg, args.out)
     return 0
 

@@ -155,20 +155,21 @@ def build_parser() -> argparse.ArgumentParser:
     from .envmap import SHIPPED
 
     rd = sub.add_parser("render", help="spheres under environment maps (Kneiphof Figs. 3-6)",
-                        description="Render spheres under environment maps with the reference, "
-                                    "ideal and filtered methods side by side, with CIEDE2000 "
-                                    "maps; writes ibl_<scene>.png, ibl_render.json and "
-                                    "ibl_render.npz into --out (SPEC §9).")
+                        description="Render spheres under environment maps with the chosen "
+                                    "methods side by side (improved shades the map's suns "
+                                    "apart), with CIEDE2000 maps; writes ibl_<scene>.png, "
+                                    "ibl_render.json and ibl_render.npz into --out (SPEC §9).")
     rd.add_argument("--envmap", action="append", metavar="PATH_OR_NAME",
                     help=f"a .hdr/.exr file or a shipped map {sorted(SHIPPED)} (repeatable; "
-                         "default: the three shipped maps)")
+                         "default: the four shipped maps)")
     rd.add_argument("--scene", action="append", choices=["fig4", "fig3", "varying"],
                     help="fig4: α=0.25, d=600 nm, η₂=1.2, η₃=2.0; fig3: roughness sweep, "
                          "η₂=1.3, η₃=2.0+0.5i, d=650 nm; varying: thickness texture "
                          "(repeatable; default all)")
     rd.add_argument("--method", action="append",
-                    choices=["reference", "ideal", "filtered", "mc"],
-                    help="methods, in columns (repeatable; default reference, ideal, filtered)")
+                    choices=["reference", "mc", "ideal", "filtered", "improved"],
+                    help="methods, in columns (repeatable; default reference, ideal, "
+                         "filtered, improved)")
     rd.add_argument("--alphas", type=float, nargs="+", help="α of the fig3 sweep "
                     "(0.05 0.15 0.3 0.6)")
     rd.add_argument("--resolution", type=int, default=64, help="pixels per sphere side (64)")

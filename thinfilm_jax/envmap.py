@@ -6,7 +6,7 @@ row i covers θ ∈ [iπ/H, (i+1)π/H] from +z (row 0 is the top), column j cove
 piecewise constant; texel (i, j) has solid angle Ω_i = (cos(iπ/H) − cos((i+1)π/H))·2π/W.
 
 Files are read with OpenImageIO (Radiance .hdr, OpenEXR .exr and anything else it reads);
-no parser is written here. Three CC0 Poly Haven maps ship with the package (`SHIPPED`),
+no parser is written here. Four CC0 Poly Haven maps ship with the package (`SHIPPED`),
 downsampled by `downsample` (solid-angle-weighted box filter, which preserves the integral
 ∫ L dω of every channel exactly).
 
@@ -40,6 +40,7 @@ SHIPPED = {
     "venice_sunset": DATA / "venice_sunset_256.hdr",
     "forest_slope": DATA / "forest_slope_256.hdr",
     "drakensberg": DATA / "drakensberg_solitary_mountain_256.hdr",
+    "kloofendal": DATA / "kloofendal_43d_clear_puresky_256.hdr",
 }
 
 

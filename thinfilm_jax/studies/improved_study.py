@@ -15,9 +15,17 @@ Uniform light (SPEC §7), against `patch_radiance(method="reference")`:
 Regions: grazing θ_o ≥ 75°, rough α ≥ 0.5, near-mirror α ≤ 0.06 (the rest: "interior").
 
 Image-based lighting (SPEC §9): the sphere renders of `studies.render` (Figures 3–6 setups,
-the three shipped maps), reference values read from ``figures/ibl_render.npz`` (written by
+the four shipped maps), reference values read from ``figures/ibl_render.npz`` (written by
 ``thinfilm-jax render``; the masks are checked against the recomputed geometry), `filtered`
-and `improved` recomputed. ΔE with the render's exposure rule.
+(the published method, the map as it is), `improved` (the map's suns split off and shaded
+apart, `prefilter_envmap(sources=ibl.DEFAULT_SOURCES)`, as `envmap_radiance` does) and
+`filtered + sources` (K 29 on the same split: an option, not the published method)
+recomputed; per render, per map (every pixel of the map's renders pooled, and the worst
+render's mean) and over all pixels. Held out (`held_out_maps`, never used to tune the
+method): venice_sunset and forest_slope, from which no source is split as shipped, each with
+an added 0.53° sun (`add_sun`) at 9° and 43° elevation carrying 70 % of the luminous power;
+their references are computed here (fig4 and fig3 α = 0.12, 32 px spheres, a few minutes).
+ΔE with the render's exposure rule.
 
 Cost: the per-shading-point kernels (`kernels.filtered_kernel`, `improved.improved_kernel`,
 `kernels.ideal_kernel`) on `points` float32 points, jit-compiled, timed interleaved (each
@@ -63,10 +71,12 @@ class StudyConfig:
     points: int = 100_000
     repeats: int = 7
     ibl: bool = True
+    held_out: bool = True  # the held-out sun maps (their references: a few minutes)
 
     @classmethod
     def quick(cls):
-        return cls(fig7_resolution=8, wide_quadrature=32, points=5_000, repeats=3)
+        return cls(fig7_resolution=8, wide_quadrature=32, points=5_000, repeats=3,
+                   held_out=False)
 
 
 def regions(theta_o, alpha):
@@ -156,56 +166,185 @@ def uniform_light(cfg: StudyConfig, verbose=True):
     return res, maps
 
 
-def ibl_renders(verbose=True, npz="figures/ibl_render.npz"):
-    """ΔE of filtered and improved on the render scenes against the stored references."""
+HELD_OUT_MAPS = ("venice_sunset", "forest_slope")  # no source is split from either as shipped
+HELD_OUT_ELEVATIONS_DEG = (9.0, 43.0)
+SUN_DIAMETER_DEG = 0.53
+SUN_FRACTION = 0.7  # of the luminous power ∫ Y dω of the map with the sun
+SUN_RGB = (1.0, 0.93, 0.82)
+IBL_METHODS = ("filtered", "improved", "filtered+sources")
+
+
+def add_sun(envmap, elevation_deg: float, azimuth: float = 2.0, *,
+            diameter_deg: float = SUN_DIAMETER_DEG, fraction: float = SUN_FRACTION,
+            rgb=SUN_RGB, supersample: int = 32):
+    """The map plus a uniform disc sun (a spherical cap of angular `diameter_deg`) at
+    (elevation, azimuth φ from +x toward +y), carrying `fraction` of the resulting map's
+    luminous power ∫ Y dω; radiance ∝ `rgb`. Each texel within a few texels of the sun gets
+    L_sun × the fraction of its solid angle inside the cap (`supersample`² points per texel,
+    weighted by sin θ), so the map holds the cap's power up to that coverage estimate.
+
+    Example (the sun carries the asked share of the luminous power):
+        >>> import numpy as np
+        >>> from thinfilm_jax.envmap import luminance_weights, texel_solid_angles
+        >>> base = np.ones((64, 128, 3))
+        >>> m = np.asarray(add_sun(base, 30.0).radiance)
+        >>> om = texel_solid_angles(64, 128)
+        >>> y0, y1 = (((x @ luminance_weights()) * om).sum() for x in (base, m))
+        >>> round(float((y1 - y0) / y1), 6)
+        0.7
+    """
+    from ..envmap import EnvMap, load_envmap, luminance_weights, texel_solid_angles
+
+    env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
+    rad = np.array(env.radiance, np.float64)
+    h, w = rad.shape[:2]
+    theta_s, phi_s = np.deg2rad(90.0 - elevation_deg), azimuth % (2 * np.pi)
+    axis = np.array([np.sin(theta_s) * np.cos(phi_s), np.sin(theta_s) * np.sin(phi_s),
+                     np.cos(theta_s)])
+    cos_gamma = np.cos(np.deg2rad(diameter_deg) / 2)
+    i0, j0 = int(theta_s / np.pi * h), int(phi_s / (2 * np.pi) * w)
+    u = (np.arange(supersample) + 0.5) / supersample
+    cover = {}
+    for i in range(max(i0 - 3, 0), min(i0 + 4, h)):
+        th = (i + u) * np.pi / h
+        for j in range(j0 - 3, j0 + 4):
+            ph = (j + u) * 2 * np.pi / w
+            t, p_ = np.meshgrid(th, ph, indexing="ij")
+            d = np.stack([np.sin(t) * np.cos(p_), np.sin(t) * np.sin(p_), np.cos(t)], -1)
+            wt = np.sin(t)
+            f = float((wt * (d @ axis >= cos_gamma)).sum() / wt.sum())
+            if f > 0:
+                cover[(i, j % w)] = f
+    om = texel_solid_angles(h, w)
+    lum = luminance_weights()
+    sun_rgb = np.asarray(rgb, np.float64)
+    omega_eff = sum(f * om[i, j] for (i, j), f in cover.items())
+    y_map = float(((rad @ lum) * om).sum())
+    scale = fraction / (1 - fraction) * y_map / (omega_eff * float(sun_rgb @ lum))
+    for (i, j), f in cover.items():
+        rad[i, j] += f * scale * sun_rgb
+    return EnvMap(jnp.asarray(rad, env.radiance.dtype))
+
+
+def _score(setup, cfg, cache, ref, mask=None):
+    """ΔE per pixel of every `IBL_METHODS` entry against `ref` on one render setup.
+    filtered reads the map as it is, improved and filtered+sources the map with its suns
+    split off (`render.method_map`)."""
     from ..colorimetry import bands_to_xyz
-    from ..envmap import load_envmap
     from ..ibl import envmap_radiance
-    from ..prefilter import prefilter_envmap
-    from .render import RenderConfig, _view_azimuth, camera, scene_setups, sphere
+    from .render import _view_azimuth, camera, method_map, sphere
+
+    scene, label, name, make_film, alpha = setup
+    env = method_map(cache, name, "reference", cfg.observer)
+    wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)
+    m, n = sphere(cfg.resolution, wo, right, up)
+    if mask is not None and not np.array_equal(m, mask):
+        raise RuntimeError("the stored references were rendered with another geometry; "
+                           "rerun `thinfilm-jax render`")
+    pts = n[m]
+    film = make_film(pts)
+    e = float(0.9 / max(np.percentile(bands_to_xyz(ref, cfg.observer)[:, 1], 99), 1e-12))
+    out = {}
+    for key in IBL_METHODS:
+        method = key.split("+")[0]
+        pref = method_map(cache, name, "improved" if "+" in key or method == "improved"
+                          else method, cfg.observer)
+        v = np.asarray(envmap_radiance(film, alpha, pts, wo, pref, method=method,
+                                       observer=cfg.observer))
+        out[key] = np.asarray(delta_e2000(v * e, ref * e, cfg.observer))
+    return out
+
+
+def _group(rows, des):
+    """Pooled statistics of a group of renders: every pixel's ΔE (mean, p95), the worst
+    render's mean, and improved ÷ filtered of the pooled mean and p95."""
+    g = {}
+    for key in IBL_METHODS:
+        s = _stats(np.concatenate([d[key] for d in des]))
+        s["worst_render_mean"] = max(r[key]["mean"] for r in rows)
+        g[key] = s
+    g["renders"] = len(rows)
+    g["ratio_mean"] = g["improved"]["mean"] / g["filtered"]["mean"]
+    g["ratio_p95"] = g["improved"]["p95"] / g["filtered"]["p95"]
+    return g
+
+
+def _row(label, scene, alpha, envmap, de):
+    return {"label": label, "scene": scene, "alpha": alpha, "envmap": envmap,
+            **{k: _stats(v) for k, v in de.items()}}
+
+
+def held_out_maps():
+    """{name: EnvMap} of the held-out set: each `HELD_OUT_MAPS` map with an added sun
+    (`add_sun`) at each `HELD_OUT_ELEVATIONS_DEG`."""
+    from ..envmap import load_envmap
+
+    return {f"{m} + sun at {el:g}°": add_sun(load_envmap(m), el)
+            for m in HELD_OUT_MAPS for el in HELD_OUT_ELEVATIONS_DEG}
+
+
+def ibl_renders(verbose=True, npz="figures/ibl_render.npz", held_out=True,
+                held_out_resolution=32):
+    """ΔE of filtered, improved and filtered+sources on the render scenes against the stored
+    references (`figures/ibl_render.npz`), per render, per map and pooled; and on the
+    held-out set (`held_out_maps`: synthetic suns the method was never tuned on), whose
+    references are computed here (fig4 and fig3 α = 0.12 at `held_out_resolution` px)."""
+    from .render import RenderConfig, map_label, render_one, scene_setups
 
     cfg = RenderConfig()
     z = np.load(npz)
-    cache, rows, all_de = {}, [], {"filtered": [], "improved": []}
-    for i, (scene, label, name, make_film, alpha) in enumerate(scene_setups(cfg)):
-        if name not in cache:
-            env = load_envmap(name)
-            cache[name] = (env, prefilter_envmap(env, observer=cfg.observer))
-        env, pref = cache[name]
-        wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)
-        mask, n = sphere(cfg.resolution, wo, right, up)
-        if not np.array_equal(mask, z[f"r{i}_mask"]):
-            raise RuntimeError(f"{npz} was rendered with another geometry; rerun render")
-        pts = n[mask]
-        film = make_film(pts)
-        ref = z[f"r{i}_reference"]
-        e = float(0.9 / max(np.percentile(bands_to_xyz(ref, cfg.observer)[:, 1], 99), 1e-12))
-        row = {"label": label, "scene": scene, "alpha": alpha}
-        for m in ("filtered", "improved"):
-            v = np.asarray(envmap_radiance(film, alpha, pts, wo, pref, method=m,
-                                           observer=cfg.observer))
-            de = np.asarray(delta_e2000(v * e, ref * e, cfg.observer))
-            row[m] = _stats(de)
-            all_de[m].append(de)
-        rows.append(row)
+    cache, rows, des = {}, [], []
+    for i, setup in enumerate(scene_setups(cfg)):
+        de = _score(setup, cfg, cache, z[f"r{i}_reference"], z[f"r{i}_mask"])
+        rows.append(_row(setup[1], setup[0], setup[4], map_label(setup[2]), de))
+        des.append(de)
         if verbose:
-            print(f"  {label:40s} filtered {row['filtered']['mean']:.2f}/"
-                  f"{row['filtered']['p95']:.2f} improved {row['improved']['mean']:.2f}/"
-                  f"{row['improved']['p95']:.2f}", file=sys.stderr)
-    tot = {m: _stats(np.concatenate(v)) for m, v in all_de.items()}
-    tot["ratio_mean"] = tot["improved"]["mean"] / tot["filtered"]["mean"]
-    tot["ratio_p95"] = tot["improved"]["p95"] / tot["filtered"]["p95"]
-    return {"renders": rows, "all": tot}
+            print(f"  {setup[1]:40s} " + " ".join(
+                f"{k} {rows[-1][k]['mean']:.2f}/{rows[-1][k]['p95']:.2f}" for k in IBL_METHODS),
+                  file=sys.stderr)
+    per_map = {}
+    for m in dict.fromkeys(r["envmap"] for r in rows):
+        sel = [k for k, r in enumerate(rows) if r["envmap"] == m]
+        per_map[m] = _group([rows[k] for k in sel], [des[k] for k in sel])
+    result = {"renders": rows, "per_map": per_map, "all": _group(rows, des)}
+    if held_out:
+        hrows, hmaps = [], {}
+        for name, env in held_out_maps().items():
+            hcfg = RenderConfig(envmaps=(name,), scenes=("fig4", "fig3"), alphas=(0.12,),
+                                methods=("reference",), resolution=held_out_resolution)
+            cache[name] = {"env": env}
+            sel, hdes = [], []
+            for setup in scene_setups(hcfg):
+                t0 = time.perf_counter()
+                ref = render_one(setup, hcfg, cache)["values"]["reference"]
+                de = _score(setup, hcfg, cache, ref)
+                hrows.append(_row(setup[1], setup[0], setup[4], name, de))
+                hrows[-1]["reference_seconds"] = time.perf_counter() - t0
+                sel.append(hrows[-1])
+                hdes.append(de)
+                if verbose:
+                    print(f"  held out {setup[1]:40s} " + " ".join(
+                        f"{k} {hrows[-1][k]['mean']:.2f}/{hrows[-1][k]['p95']:.2f}"
+                        for k in IBL_METHODS) + f" ({hrows[-1]['reference_seconds']:.0f} s)",
+                          file=sys.stderr)
+            hmaps[name] = _group(sel, hdes)
+        result["held_out"] = {"renders": hrows, "per_map": hmaps,
+                              "resolution": held_out_resolution,
+                              "sun": {"diameter_deg": SUN_DIAMETER_DEG,
+                                      "fraction": SUN_FRACTION, "rgb": SUN_RGB,
+                                      "elevations_deg": HELD_OUT_ELEVATIONS_DEG}}
+    return result
 
 
-def ibl_floor(indices=(0, 1, 2, 3, 6), npz="figures/ibl_render.npz", verbose=True):
+def ibl_floor(indices=(0, 1, 2, 3, 4, 7), npz="figures/ibl_render.npz", verbose=True):
     """What a split-sum method can reach under an environment: the film term made exact.
 
     Per shading point, the exact light-weighted film reflectance of each RGB channel,
     R̄_jk = ∫ k c_k R_jk / ∫ k c_k (k = ρ̃⟨n,ω_i⟩, the reference's texel quadrature), times
     the table A and the prefiltered radiance P_k read (a) at (ω_r, √α) as `filtered` and
     `ideal` do, (b) at the lobe's mean direction and α_eff as `improved` does. ΔE against the
-    stored reference. Costs a reference render per scene (minutes each)."""
+    stored reference. Costs a reference render per scene (minutes each). `indices` index
+    `render.scene_setups()`: by default fig4 under the four maps and fig3 at α = 0.05, 0.6."""
     from ..colorimetry import bands_to_xyz
     from ..envmap import load_envmap
     from ..ibl import _interp, _lobe_cos_weight, _r_table, auto_subdivisions, texel_nodes
@@ -392,17 +531,7 @@ def markdown(result) -> str:
                        for e in res["largest_excess"][:4])
         lines.append(f"- {g}: {ex or 'none'}")
     if "ibl" in result:
-        ibl = result["ibl"]
-        lines += ["", "## Image-based lighting: sphere renders (ΔE₀₀ mean / p95)", "",
-                  "| render | filtered | improved |", "|---|---|---|"]
-        for r in ibl["renders"]:
-            lines.append(f"| {r['label'].replace(' | ', ' · ')} | {r['filtered']['mean']:.2f} / "
-                         f"{r['filtered']['p95']:.2f} | {r['improved']['mean']:.2f} / "
-                         f"{r['improved']['p95']:.2f} |")
-        a = ibl["all"]
-        lines.append(f"| **all pixels** | {a['filtered']['mean']:.2f} / {a['filtered']['p95']:.2f} "
-                     f"| {a['improved']['mean']:.2f} / {a['improved']['p95']:.2f} "
-                     f"(× {a['ratio_mean']:.2f} / × {a['ratio_p95']:.2f}) |")
+        lines += ibl_markdown(result["ibl"])
     lines += ["", "## Kernels: error on the wide grid (kernel × A) and float32 cost", "",
               "| kernel | ΔE mean | ΔE p95 | ΔE max | µs / point | × filtered |",
               "|---|---|---|---|---|---|"]
@@ -416,6 +545,45 @@ def markdown(result) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _triple(s):
+    return f"{s['mean']:.2f} / {s['p95']:.2f} / {s['worst_render_mean']:.2f}"
+
+
+def ibl_markdown(ibl) -> list[str]:
+    """The IBL tables: per map (with the held-out set) and per render."""
+    names = {"filtered": "filtered", "improved": "improved",
+             "filtered+sources": "filtered + sources"}
+    lines = ["", "## Image-based lighting: per map (ΔE₀₀ mean / p95 / worst render's mean)", "",
+             "Pooled over every pixel of the map's renders. `improved` shades the suns split "
+             "from the map apart (`prefilter_envmap(sources=4)`), `filtered` is the published "
+             "method on the map as it is, `filtered + sources` is K 29 on the same split (an "
+             "option, not the published method). Held out: the map with an added 0.53° sun "
+             "carrying 70 % of the luminous power, fig4 and fig3 α = 0.12, "
+             f"{ibl.get('held_out', {}).get('resolution', '—')} px spheres.", "",
+             "| map | renders | filtered | improved | filtered + sources "
+             "| improved ÷ filtered (mean / p95) |", "|---|---|---|---|---|---|"]
+
+    def row(label, g):
+        return (f"| {label} | {g['renders']} | " + " | ".join(_triple(g[k]) for k in IBL_METHODS)
+                + f" | {g['ratio_mean']:.2f} / {g['ratio_p95']:.2f} |")
+
+    for m, g in ibl["per_map"].items():
+        lines.append(row(m, g))
+    for m, g in ibl.get("held_out", {}).get("per_map", {}).items():
+        lines.append(row(f"held out: {m}", g))
+    lines.append(row("**all pixels** (shipped maps)", ibl["all"]))
+    lines += ["", "## Image-based lighting: sphere renders (ΔE₀₀ mean / p95)", "",
+              "| render | " + " | ".join(names[k] for k in IBL_METHODS) + " |",
+              "|---|" + "---|" * len(IBL_METHODS)]
+    renders = [(r["label"], r) for r in ibl["renders"]] + [
+        (f"held out: {r['envmap']}, {r['label'].split(' | ')[0]}", r)
+        for r in ibl.get("held_out", {}).get("renders", [])]
+    for label, r in renders:
+        lines.append(f"| {label.replace(' | ', ' · ')} | " + " | ".join(
+            f"{r[k]['mean']:.2f} / {r[k]['p95']:.2f}" for k in IBL_METHODS) + " |")
+    return lines
+
+
 def run(cfg: StudyConfig = StudyConfig(), out="figures", verbose=True) -> dict:
     if not jax.config.jax_enable_x64:
         raise RuntimeError("the study needs float64: jax.config.update('jax_enable_x64', True)")
@@ -425,7 +593,7 @@ def run(cfg: StudyConfig = StudyConfig(), out="figures", verbose=True) -> dict:
     ref = uni["wide"].pop("_values")["reference"]
     result = {"environment": env, "config": dataclasses.asdict(cfg), "uniform": uni}
     if cfg.ibl:
-        result["ibl"] = ibl_renders(verbose)
+        result["ibl"] = ibl_renders(verbose, held_out=cfg.held_out)
     result["kernels"] = kernel_rows(cfg, ref, verbose)
     write_json(out / "improved.json", jsonable(result))
     text = markdown(result)
@@ -446,6 +614,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="figures")
     p.add_argument("--quick", action="store_true", help="small grids (smoke test)")
     p.add_argument("--no-ibl", action="store_true", help="skip the IBL renders")
+    p.add_argument("--no-held-out", action="store_true",
+                   help="skip the held-out sun maps (their references take a few minutes)")
     p.add_argument("--floor", action="store_true",
                    help="only the IBL floor of split-sum methods (`ibl_floor`, ≈ 10 min): "
                         "writes improved_ibl_floor.json")
@@ -457,6 +627,8 @@ def main(argv=None) -> int:
     cfg = StudyConfig.quick() if args.quick else StudyConfig()
     if args.no_ibl:
         cfg = dataclasses.replace(cfg, ibl=False)
+    if args.no_held_out:
+        cfg = dataclasses.replace(cfg, held_out=False)
     run(cfg, args.out)
     return 0
 

@@ -1,7 +1,8 @@
 """Sphere renders under environment maps (Kneiphof et al. 2019, Figures 3–6): `thinfilm-jax render`.
 
-Scenes (SPEC §9 and the issue's setups):
-* ``fig4`` — Figure 4: α = 0.25, d = 600 nm, η₂ = 1.2, η₃ = 2.0, κ₃ = 0, under every map;
+Scenes (SPEC §9):
+* ``fig4`` — Figure 4: α = 0.25, d = 600 nm, η₂ = 1.2, η₃ = 2.0, κ₃ = 0, under every map
+  (default: the four shipped maps, `envmap.SHIPPED`);
 * ``fig3`` — Figure 3's roughness sweep: η₂ = 1.3, η₃ = 2.0 + 0.5i, d = 650 nm,
   α ∈ `alphas`, under the first map;
 * ``varying`` — Figures 5/6-style spatially varying thickness: a smooth thickness field
@@ -9,9 +10,13 @@ Scenes (SPEC §9 and the issue's setups):
 
 Camera: orthographic, looking horizontally-down (15°) at a unit sphere, its azimuth chosen
 so that the brightest texel of the map is reflected off-centre (deterministic). Behind the
-sphere the map itself is shown (linear RGB). Every method shades the same pixels: reference
-(texel-space quadrature, float64), ideal and filtered (prefiltered map, float64 here; the
-float32 frame timings are in the benchmark). Display: exposure × radiance, converted
+sphere the map itself is shown (linear RGB). Every method shades the same pixels (`METHODS`;
+default columns `DEFAULT_METHODS`): reference (texel-space quadrature, float64), mc (Monte
+Carlo), and the real-time ideal, filtered and improved (prefiltered map, float64 here; the
+float32 frame timings are in the benchmark). ideal and filtered read the map as it is (the
+published methods); improved reads it with its suns split off and shaded apart
+(`prefilter_envmap(sources=ibl.DEFAULT_SOURCES)`, `thinfilm_jax.sources`), as
+`envmap_radiance(method="improved")` does with a plain map. Display: exposure × radiance, converted
 bands → XYZ → sRGB (colour-science), clipped; the exposure maps the reference's 99th
 luminance percentile to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled
 values against the reference (mirror white Y = 1), mean and p95 per panel.
@@ -44,25 +49,33 @@ from ..airy import choose_arithmetic
 from ..colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
 from ..envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..film import Film
-from ..ibl import REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
+from ..ibl import DEFAULT_SOURCES, REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
 from ..ibl_reference import resample_factor
 from ..prefilter import prefilter_envmap
 from ..sharding import batch_mesh, map_sharded, to_host
 
 SCENES = ("fig4", "fig3", "varying")
-METHODS = ("reference", "ideal", "filtered")
+METHODS = ("reference", "mc", "ideal", "filtered", "improved")  # every `ibl.METHODS` entry
+DEFAULT_METHODS = ("reference", "ideal", "filtered", "improved")
 
 
 @dataclass(frozen=True)
 class RenderConfig:
     envmaps: tuple[str, ...] = tuple(SHIPPED)
     scenes: tuple[str, ...] = SCENES
-    methods: tuple[str, ...] = METHODS
+    methods: tuple[str, ...] = DEFAULT_METHODS
     resolution: int = 64
     alphas: tuple[float, ...] = (0.05, 0.15, 0.3, 0.6)  # fig3
     exposure: float | None = None
     observer: str = "stiles_burch_1959_10"
     elevation_deg: float = 15.0
+
+    def __post_init__(self):
+        bad = [m for m in self.methods if m not in METHODS]
+        if bad:
+            raise ValueError(f"unknown method(s) {bad}; expected some of {METHODS}")
+        # one column per method: a repeated one would be its own reference (no error)
+        object.__setattr__(self, "methods", tuple(dict.fromkeys(self.methods)))
 
 
 def camera(view_azimuth: float, elevation_deg: float):
@@ -165,22 +178,36 @@ def _reference_map(cache: dict, name, env, alpha):
     return cache[key]
 
 
+def method_map(cache: dict, name, method: str, observer: str):
+    """What `method` reads for the map `name`, built once per map and kept in `cache`: the
+    `EnvMap` (reference, mc), the prefiltered map as it is (ideal, filtered), or prefiltered
+    with up to `ibl.DEFAULT_SOURCES` suns split off and shaded apart (improved)."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
+    if name not in cache:
+        cache[name] = {"env": load_envmap(name)}
+    maps = cache[name]
+    kind = {"reference": "env", "mc": "env", "improved": "sources"}.get(method, "plain")
+    if kind not in maps:
+        maps[kind] = prefilter_envmap(maps["env"], observer=observer,
+                                      sources=DEFAULT_SOURCES if kind == "sources" else 0)
+    return maps[kind]
+
+
 def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
     """Shade one sphere with every method; the shading points are split across `devices`
     (`thinfilm_jax.sharding.map_sharded`: None = every device, an int k = the first k)."""
     scene, label, name, make_film, alpha = setup
-    if name not in cache:
-        env = load_envmap(name)
-        cache[name] = (env, prefilter_envmap(env, observer=cfg.observer))
-    env, pref = cache[name]
+    env = method_map(cache, name, "reference", cfg.observer)
     wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)
     mask, n = sphere(cfg.resolution, wo, right, up)
     pts = n[mask]
     film = make_film(pts)
-    out = {"label": label, "scene": scene, "envmap": name, "alpha": alpha, "mask": mask,
+    out = {"label": label, "scene": scene, "envmap": map_label(name), "alpha": alpha,
+           "mask": mask,
            "times": {}, "values": {}}
     for method in cfg.methods:
-        src = env if method in ("reference", "mc") else pref
+        src = method_map(cache, name, method, cfg.observer)
         exact = method in ("reference", "mc")
         if method == "reference":  # α is traced inside the sharded program: resample here
             src = _reference_map(cache, name, env, alpha)
@@ -235,13 +262,25 @@ def summarise(results, cfg: RenderConfig) -> dict:
 
 def summary_table(summary) -> str:
     """The command's table: throughput and ΔE₀₀ against the reference per render and method;
-    "—" where there is no error (the reference itself, or no reference rendered)."""
-    lines = [f"{'render':44s} {'method':9s} {'pts/s':>9s} {'ΔE mean':>8s} {'ΔE p95':>8s}"]
+    "—" where there is no error (the reference itself, or no reference rendered).
+
+    Example (a map given by its path is labelled by its stem):
+        >>> row = {"label": f"α=0.25 | {map_label('/maps/sky_1k.hdr')}", "points": 100,
+        ...        "seconds": {"reference": 10.0, "improved": 0.01},
+        ...        "dE2000": {"improved": {"mean": 0.96, "p95": 1.85}}}
+        >>> print(summary_table({"renders": [row]}))  # doctest: +NORMALIZE_WHITESPACE
+        render                                       method        pts/s  ΔE mean   ΔE p95
+        α=0.25 | sky_1k                              reference        10        —        —
+        α=0.25 | sky_1k                              improved      10000     0.96     1.85
+    """
+    w = max([44] + [len(r["label"]) for r in summary["renders"]])
+    lines = [f"{'render':{w}s} {'method':9s} {'pts/s':>9s} {'ΔE mean':>8s} {'ΔE p95':>8s}"]
     for r in summary["renders"]:
         for m, t in r["seconds"].items():
-            de = r["dE2000"].get(m)
-            err = (f"{de['mean']:8.2f} {de['p95']:8.2f}" if de else f"{'—':>8s} {'—':>8s}")
-            lines.append(f"{r['label']:44s} {m:9s} {r['points'] / t:9.0f} {err}")
+            de = r["dE2000"].get(m) if m != "reference" else None
+            ok = de is not None and np.isfinite([de["mean"], de["p95"]]).all()
+            err = f"{de['mean']:8.2f} {de['p95']:8.2f}" if ok else f"{'—':>8s} {'—':>8s}"
+            lines.append(f"{r['label']:{w}s} {m:9s} {r['points'] / t:9.0f} {err}")
     return "\n".join(lines)
 
 

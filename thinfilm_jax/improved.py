@@ -79,7 +79,8 @@ accuracy (measured 7.2e-5, asserted 1.2e-4: tests/test_ibl.py).
 Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
 0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,
 at 1.17× its cost per shading point (before the fused kernels; figures/kernel_bench.md now
-has about 5×); sphere renders under the shipped maps 0.43 / 0.42 ×.
+has about 5×); sphere renders under the four shipped maps 0.30 / 0.27 × (with the suns
+split and shaded apart, `sources`).
 Measured gains, cost and the regions where it is not better: docs/improved.md.
 
 Example:

@@ -25,14 +25,14 @@ $$ L_j \mathrel{+}= \sum_s \sum_k \bar R_{jk}(\mu_s, \Sigma_s)\, L_{s,k}\, m_s,\
 
 The lobe mass m_s is a product rule on the cap (`cap_rule`: Gauss–Radau in cos ρ from the
 cap's axis × equally spaced φ, default the axis and a ring of 4; exact for the cap's area
-and its first and second direction moments), nodes below the horizon weigh 0; μ_s, Σ_s are the mean and covariance of the
-light direction under those weights, and R̄ is K 29 (`kernels.filtered_kernel`) of that
-small distribution: for a cap much smaller than the lobe it is the film term at the source's
-own half vector, and it filters the phase spread where the cap is not small. Each source's
-colour is folded into the bands once on the host (`with_film_tables`: a J-band Ŝ LUT of
-S_j Σ_k ĉ_k B_k), so the K 29 read costs what the plain `filtered_kernel` costs, not the
-J·3 cross bands. Cost per source and shading point: the nodes' D·G₂ (default 5) and one
-J-band K 29 evaluation.
+and its first and second direction moments); nodes below the horizon weigh 0. μ_s, Σ_s are
+the mean and covariance of the light direction under those weights, and R̄ is K 29 of that
+small distribution: for a cap much smaller than the lobe it is the film term at the
+source's own half vector, and it filters the phase spread where the cap is not small. Each
+source's colour is folded into the bands once on the host (`with_film_tables`: a J-band Ŝ
+LUT of S_j Σ_k ĉ_k B_k), so the K 29 read costs what a plain J-band read costs, not the
+J·3 cross bands; it is read bilinearly (as `improved`'s bins, within 2e-3 of the exact Ŝ).
+Cost per source and shading point: the nodes' D·G₂ (default 5) and one J-band K 29.
 
 Example (a map that is a constant sky plus one bright texel: the split keeps every channel's
 ∫ L dω, and the source sits at that texel's centre):
@@ -349,7 +349,7 @@ def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observ
         for tab, m, mu, var in zip(sources.tables, mass, mu_c, var_c):  # K 29 per source
             r = filtered_bands(film, cos_incidence_from_projection(mu),
                                taylor_opd_moments(film, mu, var), None, shat="lut",
-                               lut=tab.lut, shat0=tab.shat0, **kw)
+                               lut=tab.lut, shat0=tab.shat0, interpolation="linear", **kw)
             r = r * (tab.scale.astype(r.dtype) * m)[..., None]
             out = r if out is None else out + r
     else:  # the cross bands (or the plain ones, diagonal) for all sources at once

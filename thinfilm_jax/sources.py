@@ -276,7 +276,9 @@ def cap_nodes(sources: Sources, rule: tuple[int, int] = DEFAULT_CAP_RULE):
     t, phi, wq = (jnp.asarray(v, sources.solid_angle.dtype) for v in cap_rule(*rule))
     one_minus_cos_cap = sources.solid_angle / (2 * jnp.pi)  # Ω = 2π (1 − cos γ)
     cos_r = 1.0 - t[None, :] * one_minus_cos_cap[:, None]  # (S, Q)
-    sin_r = jnp.sqrt(jnp.clip((1.0 - cos_r) * (1.0 + cos_r), 0.0, 1.0))
+    s2 = (1.0 - cos_r) * (1.0 + cos_r)
+    off = s2 > 0  # the axis node (t = 0): sin ρ = 0 with a finite gradient (double-where)
+    sin_r = jnp.where(off, jnp.sqrt(jnp.where(off, s2, 1.0)), 0.0)
     tan1, tan2 = _frame(sources.direction)
     d = (cos_r[..., None] * sources.direction[:, None, :]
          + (sin_r * jnp.cos(phi))[..., None] * tan1[:, None, :]

@@ -79,6 +79,9 @@ REALTIME_VARIANTS = (
     ("filtered, diagonal", dict(method="filtered", cross_band=False)),
     ("improved (LUT)", dict(method="improved")),
 )
+SUN_MAP = "drakensberg"  # one compact sun: the cost of the split (`sources`)
+SUN_VARIANTS = (("filtered + 1 sun (split)", dict(method="filtered")),
+                ("improved + 1 sun (split)", dict(method="improved")))
 
 
 def throughput(width=2560, height=1440, envmap="venice_sunset", verbose=True):
@@ -92,6 +95,14 @@ def throughput(width=2560, height=1440, envmap="venice_sunset", verbose=True):
         rows.append(t)
         if verbose:
             print(f"  {name:24s} {t['warm_s']:8.3f} s/frame  compile {t['compile_s']:6.2f} s")
+    pref_sun = prefilter_envmap(SUN_MAP, sources=4).astype(F32)
+    for name, kw in SUN_VARIANTS:  # the same frame under a map with its sun split
+        t = _time(lambda kw=kw: envmap_radiance(film, alpha, n, view, pref_sun, **kw))
+        t.update(name=f"{name}, {SUN_MAP}", points=width * height,
+                 points_per_s=width * height / t["warm_s"])
+        rows.append(t)
+        if verbose:
+            print(f"  {t['name']:24s} {t['warm_s']:8.3f} s/frame  compile {t['compile_s']:6.2f} s")
     base = {r["name"]: r["warm_s"] for r in rows}
     for r in rows:
         r["vs_ideal"] = r["warm_s"] / base["ideal"]
@@ -159,6 +170,9 @@ OPTION_VARIANTS = (
     ("filtered, 33 levels", dict(levels=33), dict(method="filtered")),
     ("improved (bins of cos θ₁, P at the lobe's mean direction)", {},
      dict(method="improved")),
+    ("filtered + suns split (prefilter_envmap(sources=4))", dict(sources=4),
+     dict(method="filtered")),
+    ("improved + suns split (sources=4: its default)", dict(sources=4), dict(method="improved")),
 )
 
 

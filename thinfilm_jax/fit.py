@@ -36,7 +36,7 @@ wrong one. When the thickness is free the solve is multi-start, in these stages:
 2b. *fringe order, explicitly*: from the best short solve, starts ±1 … ±`n_orders` (2)
    interference orders away in thickness, Δd = λ̄ / (2 η₂ ⟨cos θ₂⟩) (λ̄ the observer's mean
    band centroid), short-solved in a second round of the same batch. The screen alone
-   missed 3 of 80 noise-free films of the issue-13 set (d 150–1200 nm, η₂ 1.2–1.7, six
+   missed 3 of 80 noise-free films of the calibration set (d 150–1200 nm, η₂ 1.2–1.7, six
    views 0–70°, one initial guess d = 500 nm, η₂ = 1.4): each landed one order too thick
    with η₂ nearly right (d 805 → 1003, 1170 → 1370, 981 → 1171 nm); with this stage all
    three are found (`python -m thinfilm_jax.studies.coverage`). When η₂ is free the same

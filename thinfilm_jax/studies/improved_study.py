@@ -9,7 +9,7 @@ reach under the shipped maps when its film term is exact).
 
 Uniform light (SPEC §7), against `patch_radiance(method="reference")`:
 * the wide grid: 4 materials (`MATERIALS`: κ₃ ∈ {0, 0, 0.5, 3.99}) × d ∈ {300, 600, 1000} nm ×
-  θ_o ∈ {0, 30, 50, 65, 75, 82, 88}° × α ∈ {0.01, 0.06, 0.25, 0.5, 0.9} (the issue's grid
+  θ_o ∈ {0, 30, 50, 65, 75, 82, 88}° × α ∈ {0.01, 0.06, 0.25, 0.5, 0.9} (three materials
   plus the soap film), reference quadrature 64²;
 * the Figure 7 panel sets (`figure7.grids`, cell centres) at `fig7_resolution`², quadrature 32².
 Regions: grazing θ_o ≥ 75°, rough α ≥ 0.5, near-mirror α ≤ 0.06 (the rest: "interior").

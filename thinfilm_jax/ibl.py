@@ -190,9 +190,8 @@ def _realtime_points(film, alpha, normal, view, pref, cfg):
         lut = pref.lut if cross else (build_shat_lut(observer, dtype=alpha.dtype)
                                       if shat == "lut" else None)
         out = out + source_radiance(film, alpha, normal, view, pref.sources,
-                                    observer=cross_band_name(observer) if cross else observer,
-                                    terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
-                                    cross_band=cross)
+                                    observer=observer, terms=terms, shat=shat, lut=lut,
+                                    arithmetic=arithmetic, cross_band=cross)
     return out
 
 

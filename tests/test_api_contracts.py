@@ -7,8 +7,8 @@ import pytest
 from jax.test_util import check_grads
 
 import thinfilm_jax as tf
-from thinfilm_jax import kernels
-from thinfilm_jax.lut import build_shat_lut
+from thinfilm_jax.realtime import kernels
+from thinfilm_jax.spectral.lut import build_shat_lut
 
 FILM = tf.Film(600.0, 1.3, 2.0, 0.5)  # the Figure 7 film; interior point of every path
 THETA_O, ALPHA = 0.6, 0.3

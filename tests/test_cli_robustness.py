@@ -7,8 +7,8 @@ import os
 import pytest
 
 import thinfilm_jax as tf
-from thinfilm_jax import fit_cli
-from thinfilm_jax.cli import main
+from thinfilm_jax.cli import fit as fit_cli
+from thinfilm_jax.cli.main import main
 
 PATCH_CSV = ("# alpha = 0.25\n"
              '# initial = {"thickness": 350, "eta_film": 1.3, "eta_base": 2.0, "kappa_base": 0.5}\n'
@@ -22,8 +22,8 @@ def no_fit(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("the fit ran although the arguments were bad")
 
-    monkeypatch.setattr("thinfilm_jax.fit.fit_film", boom)
-    monkeypatch.setattr("thinfilm_jax.fit.fit_spectrum", boom)
+    monkeypatch.setattr("thinfilm_jax.fit.film_fit.fit_film", boom)
+    monkeypatch.setattr("thinfilm_jax.fit.film_fit.fit_spectrum", boom)
 
 
 @pytest.fixture
@@ -31,7 +31,7 @@ def no_figure(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("figure7 computed although the arguments were bad")
 
-    monkeypatch.setattr("thinfilm_jax.cli._figure7", boom)  # build_parser binds it per call
+    monkeypatch.setattr("thinfilm_jax.cli.main._figure7", boom)  # build_parser binds it per call
 
 
 def test_version(capsys):
@@ -74,7 +74,7 @@ def test_render_bad_arguments_fail_before_computing(argv, words, monkeypatch, ca
     def boom(*a, **k):
         raise AssertionError("render computed although the arguments were bad")
 
-    monkeypatch.setattr("thinfilm_jax.cli._render", boom)
+    monkeypatch.setattr("thinfilm_jax.cli.main._render", boom)
     with pytest.raises(SystemExit) as e:
         main(["render", *argv])
     assert e.value.code == 2
@@ -97,7 +97,7 @@ def test_errors_while_running_are_one_line(monkeypatch, capsys, tmp_path):
     def disk_full(*a, **k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr("thinfilm_jax.cli._figure7", disk_full)
+    monkeypatch.setattr("thinfilm_jax.cli.main._figure7", disk_full)
     assert main(["figure7", "--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert err.strip() == "thinfilm-jax figure7: error: [Errno 28] No space left on device"
@@ -182,7 +182,7 @@ def test_fit_interrupted_leaves_nothing(tmp_path, monkeypatch, capsys):
     def ctrl_c(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("thinfilm_jax.fit.fit_film", ctrl_c)
+    monkeypatch.setattr("thinfilm_jax.fit.film_fit.fit_film", ctrl_c)
     assert main(["fit", str(src)]) == 130
     assert "interrupted; no partial output" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["obs.csv"]
@@ -201,7 +201,7 @@ def test_fit_interrupted_while_writing_leaves_nothing(tmp_path, monkeypatch):
             return {"params": {"thickness": 600.0}, "stderr": {"thickness": 1.0}, "loss": 0.0,
                     "converged": True, "degenerate": []}
 
-    monkeypatch.setattr("thinfilm_jax.fit.fit_film", lambda *a, **k: Result())
+    monkeypatch.setattr("thinfilm_jax.fit.film_fit.fit_film", lambda *a, **k: Result())
 
     def ctrl_c(*a, **k):
         raise KeyboardInterrupt

@@ -16,8 +16,8 @@ SKIP = {"thinfilm_jax.__main__"}
 # at least one (the public API — the package itself, every core module, the CLI parsers — and
 # each study with a function of its own contract: peers, stiff, stability, figure7, render, …)
 NO_EXAMPLES = {
-    "thinfilm_jax._io": "private: the atomic file writes of the drivers, no user API",
-    "thinfilm_jax._cli_checks": "private: the CLI's range checks of parsed options "
+    "thinfilm_jax.core._io": "private: the atomic file writes of the drivers, no user API",
+    "thinfilm_jax.cli._checks": "private: the CLI's range checks of parsed options "
                                 "(tests/test_cli_robustness.py runs them through the CLI)",
     "thinfilm_jax.studies": "a package docstring only: it defines nothing",
     "thinfilm_jax.studies._common": "private: materials and error statistics of the studies",
@@ -32,6 +32,9 @@ NO_EXAMPLES = {
                                      "whose examples are in patch.py and fit.py, or summaries "
                                      "and plots of a run's records)",
 }
+NO_EXAMPLES.update({f"thinfilm_jax.{layer}": "a layer's package docstring only: it defines nothing"
+                    for layer in ("core", "optics", "spectral", "brdf", "realtime", "shading",
+                                  "fit", "cli")})
 MODULES = ["thinfilm_jax"] + sorted(
     m.name for m in pkgutil.walk_packages(thinfilm_jax.__path__, "thinfilm_jax.")
     if m.name not in SKIP)

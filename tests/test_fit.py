@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from thinfilm_jax import Film, airy_reflectance
-from thinfilm_jax.cli import main as cli_main
-from thinfilm_jax.fit import (DEFAULT_BOUNDS, FitOptions, FitResult, _to_x, _to_y, fit_film,
+from thinfilm_jax.cli.main import main as cli_main
+from thinfilm_jax.fit.film_fit import (DEFAULT_BOUNDS, FitOptions, FitResult, _to_x, _to_y, fit_film,
                               fit_spectrum, patch_model, spectrum_model)
-from thinfilm_jax.patch import patch_radiance
+from thinfilm_jax.shading.patch import patch_radiance
 
 FIG7 = Film(600.0, 1.3, 2.0, 0.5)  # Kneiphof et al. 2019 Figure 7 film (SPEC §7)
 ALPHA = 0.25

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from thinfilm_jax import Film, airy_reflectance
-from thinfilm_jax.fit import FitOptions, fit_spectrum
+from thinfilm_jax.fit.film_fit import FitOptions, fit_spectrum
 
 # 400 fits: one compilation, then ~25 ms per fit (2 shared cores); 100 fits could not tell a
 # standard error 20 % off from a right one (sd of the mean of z² over N fits ≈ √(2.13 / N)).

@@ -1,4 +1,4 @@
-"""Thickness maps (`thinfilm_jax.fit_map`): recovery of a synthetic oxide /
+"""Thickness maps (`thinfilm_jax.fit.thickness_map`): recovery of a synthetic oxide /
 soap wedge rendered by the library, the neighbour prior against fringe-order outliers, input
 checks and the ``thinfilm-jax fit-map`` command.
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from thinfilm_jax import Film
-from thinfilm_jax.fit_map import (MAP_OPTIONS, _grid_losses, _pixel_model, fit_patch_map,
+from thinfilm_jax.fit.thickness_map import (MAP_OPTIONS, _grid_losses, _pixel_model, fit_patch_map,
                                   render_patch_map)
 
 H = W = 8
@@ -131,7 +131,7 @@ def test_cli_fit_map(wedge, tmp_path, capsys):
     """``thinfilm-jax fit-map``: the map, PNG and JSON written; per-pixel view angles."""
     import json
 
-    from thinfilm_jax.cli import main
+    from thinfilm_jax.cli.main import main
 
     d, theta, img = wedge
     np.save(tmp_path / "img.npy", img)
@@ -160,7 +160,7 @@ def test_cli_fit_map(wedge, tmp_path, capsys):
 ])
 def test_cli_fit_map_bad_arguments(tmp_path, capsys, extra, rc_or_exit, match):
     """Usage errors (exit 2) and bad files (exit 1) are one line, before any fitting."""
-    from thinfilm_jax.cli import main
+    from thinfilm_jax.cli.main import main
 
     np.save(tmp_path / "img.npy", np.full((H, W, 3), 0.1))
     np.save(tmp_path / "theta.npy", np.zeros((3, 3)))
@@ -183,8 +183,8 @@ def test_envmap_map_background_and_recovery():
     recovered noise-free. Same map / α / grid / pixel count as the module's doctest, so the
     compiled functions are shared in a full run."""
     from thinfilm_jax import prefilter_envmap
-    from thinfilm_jax.fit_map import fit_envmap_map
-    from thinfilm_jax.ibl import envmap_radiance
+    from thinfilm_jax.fit.thickness_map import fit_envmap_map
+    from thinfilm_jax.shading.ibl import envmap_radiance
 
     sky = np.ones((8, 16, 3)) * np.linspace(2.0, 0.5, 8)[:, None, None]  # bright zenith
     pref = prefilter_envmap(sky, levels=3, resolution=(8, 16), albedo_shape=(8, 5))

@@ -8,8 +8,8 @@ import pytest
 from thinfilm_jax import (EnvMap, Film, PrefilteredEnvMap, SHIPPED_ENVMAPS, albedo,
                           envmap_radiance, load_envmap, patch_radiance, prefilter_envmap,
                           rgb_reflectance)
-from thinfilm_jax.envmap import downsample, save_envmap, texel_centers, texel_solid_angles
-from thinfilm_jax.microfacet import brdf_no_fresnel
+from thinfilm_jax.shading.envmap import downsample, save_envmap, texel_centers, texel_solid_angles
+from thinfilm_jax.brdf.microfacet import brdf_no_fresnel
 
 FILM = Film(600.0, 1.3, 2.0, 0.5)
 Z = np.array([0.0, 0.0, 1.0])
@@ -144,7 +144,7 @@ def test_reference_converged_by_refinement(forest):
 
 
 def _auto(env, alpha):
-    from thinfilm_jax.ibl import auto_subdivisions
+    from thinfilm_jax.shading.ibl import auto_subdivisions
 
     return auto_subdivisions(env.shape[0], alpha)
 
@@ -285,7 +285,7 @@ def test_improved_pinned_under_an_environment(forest, forest_pref):
     total spread of c (K = 1) 5.29 / 15.63, 0.83; every bin reading the whole lobe's
     radiance instead of its own part's 8.74 / 34.86, 1.38. Each fails every bound.
     (The reference at 32 × 64, s = 4, is converged: `test_reference_converged_by_refinement`.)"""
-    from thinfilm_jax.colorimetry import bands_to_xyz, delta_e2000
+    from thinfilm_jax.spectral.colorimetry import bands_to_xyz, delta_e2000
 
     wo = np.array([0.6, 0.3, 0.5]) / np.linalg.norm([0.6, 0.3, 0.5])
     n = _sphere_points(wo)
@@ -386,7 +386,7 @@ def test_contractions_state_their_precision(method):
         assert count_contractions(fn, *args) >= 1
     assert_contractions_precise(fn, *args)
     if method == "filtered":  # the prefilter's own contractions too (one level)
-        from thinfilm_jax.prefilter import _filter_level
+        from thinfilm_jax.shading.prefilter import _filter_level
 
         d = jnp.asarray(texel_centers(8, 16).reshape(-1, 3), jnp.float32)
         om = jnp.asarray(texel_solid_angles(8, 16).reshape(-1), jnp.float32)
@@ -445,7 +445,7 @@ def test_stiff_inputs_finite_and_bounded(dtype):
 def test_to_equirect_finite_gradient_at_the_poles():
     """The lookup coordinates of the zenith/nadir have finite derivatives (they used to be
     NaN: hypot and arctan2 at the origin), and v is continuous through the pole."""
-    from thinfilm_jax.envmap import to_equirect
+    from thinfilm_jax.shading.envmap import to_equirect
 
     for w in (jnp.asarray([0.0, 0.0, 1.0]), jnp.asarray([0.0, 0.0, -1.0])):
         g = jax.grad(lambda o: jnp.sum(jnp.stack(to_equirect(o))))(w)

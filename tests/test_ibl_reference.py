@@ -1,4 +1,4 @@
-"""The adaptive reference of SPEC §9 (thinfilm_jax/ibl_reference.py) against the exhaustive
+"""The adaptive reference of SPEC §9 (thinfilm_jax/shading/ibl_reference.py) against the exhaustive
 texel quadrature it replaces, and the resampling of large maps."""
 
 import jax.numpy as jnp
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from thinfilm_jax import Film, envmap_radiance, load_envmap
-from thinfilm_jax.envmap import downsample
-from thinfilm_jax.ibl_reference import exact_radiance, resample_factor
+from thinfilm_jax.shading.envmap import downsample
+from thinfilm_jax.shading.ibl_reference import exact_radiance, resample_factor
 
 FILM = Film(600.0, 1.2, 2.0, 0.0)
 

@@ -1,4 +1,4 @@
-"""`method="improved"` (thinfilm_jax/improved.py, docs/improved.md): K 29 per
+"""`method="improved"` (thinfilm_jax/realtime/improved.py, docs/improved.md): K 29 per
 equal-probability bin.
 
 Physics checks: the bins reproduce the lobe's moments of cos θ₁ (law of total variance),
@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 
 from thinfilm_jax import Film, ModelOptions, patch_radiance
-from thinfilm_jax.improved import (_bin_stats, bin_table, improved_bands, improved_bins,
+from thinfilm_jax.realtime.improved import (_bin_stats, bin_table, improved_bands, improved_bins,
                                    improved_kernel)
-from thinfilm_jax.kernels import ideal_kernel
-from thinfilm_jax.lut import build_shat_lut, lookup
-from thinfilm_jax.microfacet import patch_quadrature
-from thinfilm_jax.reflectance import spectral_bands
-from thinfilm_jax.spectra import shat_host
+from thinfilm_jax.realtime.kernels import ideal_kernel
+from thinfilm_jax.spectral.lut import build_shat_lut, lookup
+from thinfilm_jax.brdf.microfacet import patch_quadrature
+from thinfilm_jax.spectral.reflectance import spectral_bands
+from thinfilm_jax.spectral.spectra import shat_host
 
 FIG7 = Film(600.0, 1.3, 2.0, 0.5)
 SMALL = dict(shape=(16, 9), quadrature=(24, 24))
@@ -121,7 +121,7 @@ def test_pinned_accuracy_under_uniform_light():
     Mutations: without the within-bin spread of D (σ_D,k = 0) improved is 1.78 / 2.69,
     ratio 0.31; with every bin at the lobe's mean and total spread (K = 1) 6.61 / 10.64,
     ratio 1.15. Both fail every bound."""
-    from thinfilm_jax.colorimetry import delta_e2000
+    from thinfilm_jax.spectral.colorimetry import delta_e2000
 
     t, a = np.meshgrid(np.deg2rad([30.0, 65.0, 82.0]), [0.25, 0.6])
     opts = ModelOptions(quadrature=(32, 32))
@@ -157,7 +157,7 @@ def test_sub_lobes_reproduce_the_lobe_mean(theta, alpha):
     """The bins split the light lobe: the mean of the K sub-lobes' mean light directions is
     the whole lobe's (law of total expectation), with |μ_k| = √(1 − tr Σ_k) for unit
     vectors; against `microfacet.light_moments` of the whole quadrature."""
-    from thinfilm_jax.microfacet import light_moments
+    from thinfilm_jax.brdf.microfacet import light_moments
 
     mu, _ = light_moments(patch_quadrature(theta, alpha, quadrature=(64, 64)))
     for k in (1, 3):
@@ -175,7 +175,7 @@ def test_lobe_directions_smooth_through_normal_view():
     θ_o → 0: between table nodes the read direction stays within 0.03 rad of the exact mean
     direction of the bin's part of the lobe (the old β − θ_o table was off by 0.09 rad at
     θ_o = 0.1, α = 0.25: β is odd in θ_o, the table's grid is in √cos θ_o)."""
-    from thinfilm_jax.improved import lookup_lobe
+    from thinfilm_jax.realtime.improved import lookup_lobe
 
     tab = bin_table()
     for theta in (0.1, 0.2, 0.4):  # (below ≈ 0.05 the quadrature's own ring-tie noise is ~0.02)

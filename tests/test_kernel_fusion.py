@@ -16,8 +16,8 @@ import jax.numpy as jnp
 import pytest
 
 from thinfilm_jax import Film
-from thinfilm_jax.kernels import filtered_kernel, ideal_kernel
-from thinfilm_jax.lut import build_shat_lut
+from thinfilm_jax.realtime.kernels import filtered_kernel, ideal_kernel
+from thinfilm_jax.spectral.lut import build_shat_lut
 
 N = 65536
 F32 = jnp.float32

@@ -15,3 +15,77 @@ def test_layout_matches_tree():
     assert len(listed) == len(set(listed)), "a module is listed twice"
     missing, extra = sorted(set(modules) - set(listed)), sorted(set(listed) - set(modules))
     assert not missing and not extra, f"add to README Layout: {missing}; remove: {extra}"
+
+
+LAYERS = ("core", "optics", "spectral", "brdf", "realtime", "shading", "fit", "studies", "cli")
+
+
+def _imports(path: Path, package: str):
+    """Every module of the package that `path` imports (relative or absolute, lazy included)."""
+    import ast
+
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            names = [target] + [f"{target}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        else:
+            continue
+        for n in names:
+            parts = n.split(".")
+            if parts[0] == "thinfilm_jax" and len(parts) > 1 and parts[1] in LAYERS:
+                yield n, parts[1]
+
+
+def test_layers_import_only_downwards():
+    """core → optics → spectral → brdf → realtime → shading → fit → studies → cli: a module
+    imports its own layer and those before it, never one after (README "## Layout")."""
+    package = ROOT / "thinfilm_jax"
+    bad = []
+    for path in sorted(package.rglob("*.py")):
+        rel = path.relative_to(package)
+        if len(rel.parts) < 2:  # __init__.py, __main__.py: the public face, above every layer
+            continue
+        own = LAYERS.index(rel.parts[0])
+        pkg = ".".join(("thinfilm_jax",) + rel.parts[:-1])
+        for name, layer in _imports(path, pkg):
+            if LAYERS.index(layer) > own:
+                bad.append(f"{rel} imports {name}")
+    assert not bad, "\n".join(bad)
+
+
+def test_no_import_cycle_between_modules():
+    """The module import graph (lazy imports included) has no cycle."""
+    package = ROOT / "thinfilm_jax"
+    graph = {}
+    for path in package.rglob("*.py"):
+        rel = path.relative_to(package)
+        mod = ".".join(("thinfilm_jax",) + rel.with_suffix("").parts)
+        pkg = mod.rsplit(".", 1)[0] if path.name != "__init__.py" else mod[: -len(".__init__")]
+        mods = set()
+        for name, _ in _imports(path, pkg):
+            while name and not (ROOT / (name.replace(".", "/") + ".py")).exists():
+                name = name.rpartition(".")[0]  # `from pkg.mod import func` → pkg.mod
+            if name and name != mod:
+                mods.add(name)
+        graph[mod] = mods
+    state = {}
+
+    def visit(m, stack):
+        state[m] = 1
+        for n in graph.get(m, ()):
+            if state.get(n) == 1:
+                raise AssertionError("import cycle: " + " → ".join(stack + [m, n]))
+            if n not in state:
+                visit(n, stack + [m])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [])

@@ -5,8 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from thinfilm_jax.lut import alias_free_path, build_shat_lut, lookup, lut_max_error
-from thinfilm_jax.spectra import sensitivity_ft
+from thinfilm_jax.spectral.lut import alias_free_path, build_shat_lut, lookup, lut_max_error
+from thinfilm_jax.spectral.spectra import sensitivity_ft
 
 OBS = ["stiles_burch_1959_10", "cie_1931_2"]
 # LUT accuracy at the default resolution (Δμ = 25 nm, 128 σ samples): max |LUT − exact| over

@@ -1,4 +1,4 @@
-"""Physics tests for thinfilm_jax.microfacet (GGX/Beckmann, height-correlated Smith, patch rule).
+"""Physics tests for thinfilm_jax.brdf.microfacet (GGX/Beckmann, height-correlated Smith, patch rule).
 
 References are independent: closed-form textbook formulas in numpy, scipy quad/dblquad, a
 brute-force tensor rule over the light direction ω_i, and the Monte Carlo estimator with its own
@@ -14,7 +14,7 @@ import pytest
 from jax.test_util import check_grads
 from scipy import integrate, special
 
-from thinfilm_jax import microfacet as mf
+from thinfilm_jax.brdf import microfacet as mf
 
 KINDS = ["ggx", "beckmann"]
 DEG = np.pi / 180

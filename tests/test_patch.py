@@ -7,10 +7,10 @@ import pytest
 
 import thinfilm_jax as tf
 from thinfilm_jax import Film, ModelOptions
-from thinfilm_jax.colorimetry import bands_to_xyz, delta_e2000
-from thinfilm_jax.microfacet import albedo, light_moments, patch_quadrature
-from thinfilm_jax.opd import (opd_moments_exact, project_light_moments, taylor_opd_moments)
-from thinfilm_jax.patch import METHODS, patch_one, patch_radiance, patch_radiance_mc
+from thinfilm_jax.spectral.colorimetry import bands_to_xyz, delta_e2000
+from thinfilm_jax.brdf.microfacet import albedo, light_moments, patch_quadrature
+from thinfilm_jax.optics.opd import (opd_moments_exact, project_light_moments, taylor_opd_moments)
+from thinfilm_jax.shading.patch import METHODS, patch_one, patch_radiance, patch_radiance_mc
 
 FIG7 = Film(600.0, 1.3, 2.0, 0.5)
 # A grid that includes grazing views and near-mirror / very rough surfaces.

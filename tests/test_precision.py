@@ -12,8 +12,8 @@ import pytest
 from _precision import assert_contractions_precise, count_contractions, imprecise_contractions
 
 import thinfilm_jax as tf
-from thinfilm_jax import lut as lut_mod
-from thinfilm_jax.patch import METHODS as PATCH_METHODS
+from thinfilm_jax.spectral import lut as lut_mod
+from thinfilm_jax.shading.patch import METHODS as PATCH_METHODS
 
 F32 = jnp.float32
 FILM32 = tf.Film(600.0, 1.3, 2.0, 0.5).astype(F32)
@@ -91,7 +91,7 @@ def test_microfacet_and_mc():
         jax.random.PRNGKey(0))
     mean = jnp.asarray([0.1, 0.0, 0.9], F32)
     cov = jnp.eye(3, dtype=F32) * F32(0.01)
-    from thinfilm_jax.opd import project_light_moments
+    from thinfilm_jax.optics.opd import project_light_moments
 
     # written as explicit products and sums (elementwise, fused into the kernels' loop)
     assert count_contractions(project_light_moments, mean, mean, cov) == 0

@@ -14,8 +14,11 @@ import pytest
 import tmm
 
 import thinfilm_jax as tf
-from thinfilm_jax import airy, fresnel, series, spectra
-from thinfilm_jax.spectra import OBSERVERS, get_observer, sensitivity_ft, shat_at_zero
+from thinfilm_jax.optics import airy
+from thinfilm_jax.optics import fresnel
+from thinfilm_jax.optics import series
+from thinfilm_jax.spectral import spectra
+from thinfilm_jax.spectral.spectra import OBSERVERS, get_observer, sensitivity_ft, shat_at_zero
 
 # Series with M = 200 vs Airy per polarisation (SPEC §3), test_series_m200_equals_airy:
 # measured max 7.8e-16 (complex path), 1.7e-16 (real path), i.e. rounding; asserted at 1e-14.

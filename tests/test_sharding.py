@@ -1,4 +1,4 @@
-"""`thinfilm_jax.sharding`: a batch split across devices gives what one device gives.
+"""`thinfilm_jax.core.sharding`: a batch split across devices gives what one device gives.
 
 The main test process initialised JAX with one CPU device, so the multi-device checks run in
 subprocesses started with ``XLA_FLAGS=--xla_force_host_platform_device_count=K`` (set before
@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import thinfilm_jax as tf
-from thinfilm_jax.sharding import batch_mesh, map_sharded, shard_batch, to_host
+from thinfilm_jax.core.sharding import batch_mesh, map_sharded, shard_batch, to_host
 
 #: A sharded evaluation runs the same program on smaller blocks; XLA's per-block code may
 #: round differently in the last place, so ≤ 1 ulp is asserted (measured: 0 ulp in every
@@ -135,7 +135,7 @@ def test_jit_mode_equals_shard_map_mode():
 
 
 def test_cli_devices_checked_before_work(tmp_path, capsys):
-    from thinfilm_jax.cli import main
+    from thinfilm_jax.cli.main import main
 
     n = len(jax.devices())
     assert main(["figure7", "--devices", str(n + 1), "--out", str(tmp_path)]) == 1
@@ -153,7 +153,7 @@ _CHILD = textwrap.dedent("""
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp, numpy as np
     import thinfilm_jax as tf
-    from thinfilm_jax.sharding import initialize_distributed, map_sharded, to_host
+    from thinfilm_jax.core.sharding import initialize_distributed, map_sharded, to_host
 
     if os.environ.get("JAX_NUM_PROCESSES"):
         initialize_distributed()

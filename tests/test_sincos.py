@@ -6,7 +6,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from thinfilm_jax import airy, fresnel
+from thinfilm_jax.optics import airy
+from thinfilm_jax.optics import fresnel
 
 
 def test_sincos_turns_matches_numpy_any_argument():

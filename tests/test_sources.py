@@ -1,4 +1,4 @@
-"""Compact sources (suns) split from a map and shaded apart (`thinfilm_jax.sources`,
+"""Compact sources (suns) split from a map and shaded apart (`thinfilm_jax.shading.sources`,
 docs/improved.md): the split keeps every channel's ∫ L dω, the cap term equals the exact
 integral of the part of the map it replaces, and its geometry, limits and gradients hold.
 
@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 
 from thinfilm_jax import EnvMap, Film, envmap_radiance, load_envmap, prefilter_envmap
-from thinfilm_jax.envmap import luminance_weights, texel_centers, texel_solid_angles
-from thinfilm_jax.lut import build_shat_lut
-from thinfilm_jax.microfacet import brdf_no_fresnel
-from thinfilm_jax.reflectance import rgb_reflectance
-from thinfilm_jax.sources import Sources, extract_sources, source_radiance
-from thinfilm_jax.spectra import DEFAULT_OBSERVER
-from thinfilm_jax.uplift import cross_band_name
+from thinfilm_jax.shading.envmap import luminance_weights, texel_centers, texel_solid_angles
+from thinfilm_jax.spectral.lut import build_shat_lut
+from thinfilm_jax.brdf.microfacet import brdf_no_fresnel
+from thinfilm_jax.spectral.reflectance import rgb_reflectance
+from thinfilm_jax.shading.sources import Sources, extract_sources, source_radiance
+from thinfilm_jax.spectral.spectra import DEFAULT_OBSERVER
+from thinfilm_jax.spectral.uplift import cross_band_name
 
 FILM = Film(600.0, 1.3, 2.0, 0.5)
 OBS = cross_band_name(DEFAULT_OBSERVER)  # R_jk under RGB light, as `envmap_radiance` shades

@@ -15,8 +15,9 @@ import pytest
 import tmm
 
 import thinfilm_jax as tf
-from thinfilm_jax import colorimetry, spectra
-from thinfilm_jax.spectra import get_observer, sensitivity_ft
+from thinfilm_jax.spectral import colorimetry
+from thinfilm_jax.spectral import spectra
+from thinfilm_jax.spectral.spectra import get_observer, sensitivity_ft
 
 OBSERVER_NAMES = ("stiles_burch_1959_10", "cie_1931_2")
 GH_NODES = 80  # Gauss–Hermite nodes for E[Ŝ(x)], x ~ N(μ, σ²), σ ≤ 300 nm

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import thinfilm_jax as tf
-from thinfilm_jax._validate import checking
+from thinfilm_jax.core._validate import checking
 
 FILM = tf.Film(500.0, 1.4, 1.8, 0.3)
 
@@ -327,8 +327,8 @@ def test_checked_as_a_context():
 def test_tir_limitation_numbers():
     """README "Conventions and documented limitations": under TIR at 1|2 the Fourier and
     filtered paths give 1 where the exact band reflectance keeps frustrated transmission."""
-    from thinfilm_jax.filtered import filtered_bands
-    from thinfilm_jax.opd import OPDMoments
+    from thinfilm_jax.realtime.filtered import filtered_bands
+    from thinfilm_jax.optics.opd import OPDMoments
 
     d = np.arange(0.0, 3001.0)
     crit = np.rad2deg(np.arcsin(1.2 / 1.5))

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from ..colorimetry import delta_e2000
-from ..film import Film
-from ..microfacet import view_direction
+from ..spectral.colorimetry import delta_e2000
+from ..core.film import Film
+from ..brdf.microfacet import view_direction
 from ._timing import Timing
 
 # name: (eta_film, eta_base, kappa_base, eta_outer)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import jax
 
-from .._io import atomic_write, write_json
+from ..core._io import atomic_write, write_json
 from ._common import MATERIALS, BenchConfig
 from ._timing import environment, fmt, jsonable, log
 from .error_runtime import bench_patches, bench_shading

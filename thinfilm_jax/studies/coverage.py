@@ -36,10 +36,10 @@ import time
 import jax
 import numpy as np
 
-from .._io import write_json
-from ..film import Film
-from ..fit import FitOptions, fit_film
-from ..patch import patch_radiance
+from ..core._io import write_json
+from ..core.film import Film
+from ..fit.film_fit import FitOptions, fit_film
+from ..shading.patch import patch_radiance
 
 VIEWS = {
     "six 0-70": np.deg2rad(np.linspace(0.0, 70.0, 6)),
@@ -193,7 +193,7 @@ def plot(result, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .._io import atomic_write
+    from ..core._io import atomic_write
 
     methods = [m for m in result["coverage"]]
     if not methods:

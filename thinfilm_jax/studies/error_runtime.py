@@ -40,14 +40,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..airy import airy_reflectance
-from ..film import Film
-from ..kernels import filtered_kernel, ideal_kernel, lobe_moments
-from ..lut import build_shat_lut, lut_max_error
-from ..options import ModelOptions
-from ..patch import patch_radiance, patch_radiance_mc
-from ..reflectance import fourier_bands, rgb_reflectance
-from ..spectra import get_observer, trapezoid_weights
+from ..optics.airy import airy_reflectance
+from ..core.film import Film
+from ..realtime.kernels import filtered_kernel, ideal_kernel, lobe_moments
+from ..spectral.lut import build_shat_lut, lut_max_error
+from ..realtime.options import ModelOptions
+from ..shading.patch import patch_radiance, patch_radiance_mc
+from ..spectral.reflectance import fourier_bands, rgb_reflectance
+from ..spectral.spectra import get_observer, trapezoid_weights
 from ._common import (
     CIE,
     DIELECTRIC_MATERIALS,

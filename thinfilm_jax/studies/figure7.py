@@ -32,13 +32,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import atomic_write, write_json
-from ..airy import choose_arithmetic
-from ..colorimetry import bands_to_srgb, delta_e2000
-from ..film import Film
-from ..options import ModelOptions
-from ..patch import patch_radiance
-from ..sharding import batch_mesh, map_sharded, to_host
+from ..core._io import atomic_write, write_json
+from ..optics.airy import choose_arithmetic
+from ..spectral.colorimetry import bands_to_srgb, delta_e2000
+from ..core.film import Film
+from ..realtime.options import ModelOptions
+from ..shading.patch import patch_radiance
+from ..core.sharding import batch_mesh, map_sharded, to_host
 
 METHOD_ORDER = ("ideal", "filtered_gt_moments", "filtered_gt_opd", "reference")
 METHOD_TITLES = {
@@ -102,7 +102,7 @@ def compute_figure7(cfg: Figure7Config = Figure7Config(), progress: bool = True,
     """Band radiances of every (row, method) on the (y, θ_o) grid: arrays (n, n, J).
 
     The patches are split across `devices` (None: every device, an int k: the first k, or a
-    sequence; `thinfilm_jax.sharding.map_sharded`): each device shades `cfg.chunk` patches
+    sequence; `thinfilm_jax.core.sharding.map_sharded`): each device shades `cfg.chunk` patches
     per progress step. Timing per method (seconds, including compilation of the first
     chunk) is returned under "seconds".
     """

@@ -62,9 +62,9 @@ def run(resolution: int = 64, out: str | Path = "figures", seed: int = 0) -> dic
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
-    from .._io import write_json
-    from ..film import Film
-    from ..fit_map import fit_patch_map, render_patch_map
+    from ..core._io import write_json
+    from ..core.film import Film
+    from ..fit.thickness_map import fit_patch_map, render_patch_map
 
     h = w = int(resolution)
     d, theta = soap_film(h, w)
@@ -113,12 +113,12 @@ def run_envmap(resolution: int = 48, out: str | Path = "figures", seed: int = 0,
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
-    from .._io import write_json
-    from ..envmap import load_envmap
-    from ..film import Film
-    from ..fit_map import fit_envmap_map
-    from ..ibl import envmap_radiance
-    from ..prefilter import prefilter_envmap
+    from ..core._io import write_json
+    from ..shading.envmap import load_envmap
+    from ..core.film import Film
+    from ..fit.thickness_map import fit_envmap_map
+    from ..shading.ibl import envmap_radiance
+    from ..shading.prefilter import prefilter_envmap
     from .render import _view_azimuth, camera, sphere, thickness_field
 
     env = load_envmap(envmap)
@@ -190,8 +190,8 @@ def _figure(path, image, d, runs, summary, title, xlabel):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .._io import atomic_write
-    from ..colorimetry import bands_to_srgb
+    from ..core._io import atomic_write
+    from ..spectral.colorimetry import bands_to_srgb
 
     names = list(runs)
     fig, axes = plt.subplots(2, 3, figsize=(12, 7.6), layout="constrained")

@@ -34,11 +34,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import write_json
-from ..airy import airy_reflectance
-from ..film import Film
-from ..fit import FitOptions, fit_film, fit_spectrum, patch_model, spectrum_model
-from ..patch import patch_radiance
+from ..core._io import write_json
+from ..optics.airy import airy_reflectance
+from ..core.film import Film
+from ..fit.film_fit import FitOptions, fit_film, fit_spectrum, patch_model, spectrum_model
+from ..shading.patch import patch_radiance
 
 THETA_O = np.deg2rad(np.linspace(0.0, 80.0, 9))
 LAMBDA = np.arange(400.0, 800.1, 5.0)

@@ -47,7 +47,7 @@ _SUMMARY = re.compile(r"^=*\s*(?P<body>(\d+ \w+(, )?)+).* in (?P<t>[\d.]+)s", re
 
 
 def _write(report: dict, out: Path) -> None:
-    from .._io import write_json
+    from ..core._io import write_json
 
     write_json(out / "gpu_check.json", report)
 
@@ -114,8 +114,8 @@ def bench_airy(sizes) -> list[dict]:
     import jax.numpy as jnp
     import numpy as np
 
-    from ..airy import airy_reflectance
-    from ..film import Film
+    from ..optics.airy import airy_reflectance
+    from ..core.film import Film
 
     rows = []
     for dtype in (jnp.float32, jnp.float64):
@@ -136,8 +136,8 @@ def bench_frame(width: int, height: int) -> list[dict]:
     """A frame of shading points under the prefiltered `venice_sunset`, float32."""
     import jax.numpy as jnp
 
-    from ..ibl import envmap_radiance
-    from ..prefilter import prefilter_envmap
+    from ..shading.ibl import envmap_radiance
+    from ..shading.prefilter import prefilter_envmap
     from .ibl_bench import frame_inputs
 
     t0 = time.perf_counter()
@@ -158,8 +158,8 @@ def bench_patches(n: int) -> list[dict]:
     """Reference patches (float64, default 48² quadrature) of the Figure 7 film."""
     import numpy as np
 
-    from ..film import Film
-    from ..patch import patch_radiance
+    from ..core.film import Film
+    from ..shading.patch import patch_radiance
 
     side = int(np.sqrt(n))
     t, a = np.meshgrid(np.linspace(0, 1.5, side), np.linspace(0.01, 1.0, side))

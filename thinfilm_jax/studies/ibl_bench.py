@@ -24,13 +24,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import atomic_write, write_json
-from ..colorimetry import delta_e2000
-from ..envmap import SHIPPED, load_envmap
-from ..film import Film
-from ..ibl import envmap_radiance
-from ..options import ModelOptions
-from ..prefilter import prefilter_envmap
+from ..core._io import atomic_write, write_json
+from ..spectral.colorimetry import delta_e2000
+from ..shading.envmap import SHIPPED, load_envmap
+from ..core.film import Film
+from ..shading.ibl import envmap_radiance
+from ..realtime.options import ModelOptions
+from ..shading.prefilter import prefilter_envmap
 from .render import camera, sphere
 
 F32 = jnp.float32
@@ -115,7 +115,7 @@ def reference_speedup(env, alphas=(0.05, 0.25, 0.6), resolution=8, repeats=3, ve
     the exhaustive one (`ibl_reference`, exhaustive=True) in one run, old and new calls
     interleaved, warm minima (compile apart); and their largest difference relative to
     each band's maximum."""
-    from ..ibl_reference import exact_radiance
+    from ..shading.ibl_reference import exact_radiance
 
     wo, right, up = camera(0.7, 15.0)
     mask, n = sphere(resolution, wo, right, up)

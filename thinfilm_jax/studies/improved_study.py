@@ -46,15 +46,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import atomic_write, write_json
-from ..colorimetry import delta_e2000
-from ..film import Film
-from ..improved import bin_table, improved_kernel
-from ..kernels import filtered_kernel, ideal_kernel
-from ..lut import build_shat_lut
-from ..microfacet import albedo, splitsum_light_moments
-from ..options import ModelOptions
-from ..patch import patch_radiance
+from ..core._io import atomic_write, write_json
+from ..spectral.colorimetry import delta_e2000
+from ..core.film import Film
+from ..realtime.improved import bin_table, improved_kernel
+from ..realtime.kernels import filtered_kernel, ideal_kernel
+from ..spectral.lut import build_shat_lut
+from ..brdf.microfacet import albedo, splitsum_light_moments
+from ..realtime.options import ModelOptions
+from ..shading.patch import patch_radiance
 from ._common import MATERIALS, material_film, view_vector
 from ._timing import environment, jsonable
 from .pareto import render_kernel_pareto
@@ -185,7 +185,7 @@ def add_sun(envmap, elevation_deg: float, azimuth: float = 2.0, *,
 
     Example (the sun carries the asked share of the luminous power):
         >>> import numpy as np
-        >>> from thinfilm_jax.envmap import luminance_weights, texel_solid_angles
+        >>> from thinfilm_jax.shading.envmap import luminance_weights, texel_solid_angles
         >>> base = np.ones((64, 128, 3))
         >>> m = np.asarray(add_sun(base, 30.0).radiance)
         >>> om = texel_solid_angles(64, 128)
@@ -193,7 +193,7 @@ def add_sun(envmap, elevation_deg: float, azimuth: float = 2.0, *,
         >>> round(float((y1 - y0) / y1), 6)
         0.7
     """
-    from ..envmap import EnvMap, load_envmap, luminance_weights, texel_solid_angles
+    from ..shading.envmap import EnvMap, load_envmap, luminance_weights, texel_solid_angles
 
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
     rad = np.array(env.radiance, np.float64)
@@ -230,8 +230,8 @@ def _score(setup, cfg, cache, ref, mask=None):
     """ΔE per pixel of every `IBL_METHODS` entry against `ref` on one render setup.
     filtered reads the map as it is, improved and filtered+sources the map with its suns
     split off (`render.method_map`)."""
-    from ..colorimetry import bands_to_xyz
-    from ..ibl import envmap_radiance
+    from ..spectral.colorimetry import bands_to_xyz
+    from ..shading.ibl import envmap_radiance
     from .render import _view_azimuth, camera, method_map, sphere
 
     scene, label, name, make_film, alpha = setup
@@ -277,7 +277,7 @@ def _row(label, scene, alpha, envmap, de):
 def held_out_maps():
     """{name: EnvMap} of the held-out set: each `HELD_OUT_MAPS` map with an added sun
     (`add_sun`) at each `HELD_OUT_ELEVATIONS_DEG`."""
-    from ..envmap import load_envmap
+    from ..shading.envmap import load_envmap
 
     return {f"{m} + sun at {el:g}°": add_sun(load_envmap(m), el)
             for m in HELD_OUT_MAPS for el in HELD_OUT_ELEVATIONS_DEG}
@@ -345,12 +345,12 @@ def ibl_floor(indices=(0, 1, 2, 3, 4, 7), npz="figures/ibl_render.npz", verbose=
     `ideal` do, (b) at the lobe's mean direction and α_eff as `improved` does. ΔE against the
     stored reference. Costs a reference render per scene (minutes each). `indices` index
     `render.scene_setups()`: by default fig4 under the four maps and fig3 at α = 0.05, 0.6."""
-    from ..colorimetry import bands_to_xyz
-    from ..envmap import load_envmap
-    from ..ibl import _interp, _lobe_cos_weight, _r_table, auto_subdivisions, texel_nodes
-    from ..improved import lookup_lobe
-    from ..prefilter import lookup_albedo, lookup_prefiltered, prefilter_envmap
-    from ..uplift import cross_band_name
+    from ..spectral.colorimetry import bands_to_xyz
+    from ..shading.envmap import load_envmap
+    from ..shading.ibl import _interp, _lobe_cos_weight, _r_table, auto_subdivisions, texel_nodes
+    from ..realtime.improved import lookup_lobe
+    from ..shading.prefilter import lookup_albedo, lookup_prefiltered, prefilter_envmap
+    from ..spectral.uplift import cross_band_name
     from .render import RenderConfig, _view_azimuth, camera, scene_setups, sphere
 
     cfg = RenderConfig()

@@ -45,7 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import atomic_write, write_json
+from ..core._io import atomic_write, write_json
 from ._timing import environment, jsonable, log
 
 F32 = jnp.float32
@@ -79,7 +79,7 @@ def shading_points(n: int, seed: int = 0):
     """`n` float32 shading points on a wide grid: films (d ∈ [0, 1000] nm, η₂ ∈ [1.2, 2.4],
     absorbing bases), views θ_o ∈ [0°, 85°], α ∈ [0.02, 0.8], and the light moments of
     the uniform-light lobe (`kernels.lobe_moments` on a 16 × 8 (θ_o, α) grid, nearest node)."""
-    from ..kernels import lobe_moments
+    from ..realtime.kernels import lobe_moments
 
     rng = np.random.default_rng(seed)
     tg, ag = np.linspace(0.0, np.radians(85.0), 16), np.linspace(0.02, 0.8, 8)
@@ -166,7 +166,7 @@ def run_kernel_bench(out="figures", *, points: int = 65536, repeats: int = 7,
     """Measure every kernel (module docstring) and write kernel_bench.json / .md in `out`."""
     import thinfilm_jax as current
 
-    from ..prefilter import prefilter_envmap
+    from ..shading.prefilter import prefilter_envmap
 
     out = Path(out)
     env = environment()

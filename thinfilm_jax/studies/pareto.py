@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from .._io import atomic_write
+from ..core._io import atomic_write
 from ._timing import fmt
 
 ERROR_FLOOR = 1e-6  # ΔE below this (the references: 0) is drawn on the floor of the log plot

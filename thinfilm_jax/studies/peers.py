@@ -30,10 +30,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..airy import airy_reflectance
-from ..film import Film
+from ..optics.airy import airy_reflectance
+from ..core.film import Film
 from ._common import MATERIALS, BenchConfig
-from .._io import atomic_write, write_json
+from ..core._io import atomic_write, write_json
 from ._timing import environment, jsonable, log, time_call, time_host
 
 

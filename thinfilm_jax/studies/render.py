@@ -15,7 +15,7 @@ default columns `DEFAULT_METHODS`): reference (texel-space quadrature, float64),
 Carlo), and the real-time ideal, filtered and improved (prefiltered map, float64 here; the
 float32 frame timings are in the benchmark). ideal and filtered read the map as it is (the
 published methods); improved reads it with its suns split off and shaded apart
-(`prefilter_envmap(sources=ibl.DEFAULT_SOURCES)`, `thinfilm_jax.sources`), as
+(`prefilter_envmap(sources=ibl.DEFAULT_SOURCES)`, `thinfilm_jax.shading.sources`), as
 `envmap_radiance(method="improved")` does with a plain map. Display: exposure × radiance, converted
 bands → XYZ → sRGB (colour-science), clipped; the exposure maps the reference's 99th
 luminance percentile to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled
@@ -44,15 +44,15 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from .._io import atomic_write, write_json
-from ..airy import choose_arithmetic
-from ..colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
-from ..envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
-from ..film import Film
-from ..ibl import DEFAULT_SOURCES, REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
-from ..ibl_reference import resample_factor
-from ..prefilter import prefilter_envmap
-from ..sharding import batch_mesh, map_sharded, to_host
+from ..core._io import atomic_write, write_json
+from ..optics.airy import choose_arithmetic
+from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
+from ..shading.envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
+from ..core.film import Film
+from ..shading.ibl import DEFAULT_SOURCES, REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
+from ..shading.ibl_reference import resample_factor
+from ..shading.prefilter import prefilter_envmap
+from ..core.sharding import batch_mesh, map_sharded, to_host
 
 SCENES = ("fig4", "fig3", "varying")
 METHODS = ("reference", "mc", "ideal", "filtered", "improved")  # every `ibl.METHODS` entry
@@ -196,7 +196,7 @@ def method_map(cache: dict, name, method: str, observer: str):
 
 def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
     """Shade one sphere with every method; the shading points are split across `devices`
-    (`thinfilm_jax.sharding.map_sharded`: None = every device, an int k = the first k)."""
+    (`thinfilm_jax.core.sharding.map_sharded`: None = every device, an int k = the first k)."""
     scene, label, name, make_film, alpha = setup
     env = method_map(cache, name, "reference", cfg.observer)
     wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)

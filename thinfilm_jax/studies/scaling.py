@@ -3,7 +3,7 @@
 ``python -m thinfilm_jax.studies.scaling`` (about 3 min here) starts one subprocess per
 device count k (``XLA_FLAGS=--xla_force_host_platform_device_count=k`` on a CPU host; on a
 machine with k accelerators the same command uses the first k of them), runs every workload
-through `thinfilm_jax.sharding.map_sharded` there, and writes ``figures/scaling.md`` and
+through `thinfilm_jax.core.sharding.map_sharded` there, and writes ``figures/scaling.md`` and
 ``figures/scaling.json``: warm seconds per call, speed-up against one device, and the
 largest difference from the one-device result (in units of the float64 eps of the largest
 value, `diff_eps`).
@@ -69,10 +69,11 @@ QUICK = dict(reference_resolution=8, ideal_resolution=32, ibl_resolution=48, map
 # ----------------------------------------------------------------------------- the child
 def _inputs(cfg: ScalingConfig, name: str):
     """(block function, in_axes, arguments, items) of one workload."""
-    from ..airy import choose_arithmetic
-    from ..film import Film
-    from ..options import ModelOptions
-    from . import figure7, render
+    from ..optics.airy import choose_arithmetic
+    from ..core.film import Film
+    from ..realtime.options import ModelOptions
+    from . import figure7
+    from . import render
 
     if name.startswith("figure7"):
         ref = name == "figure7_reference"
@@ -86,9 +87,9 @@ def _inputs(cfg: ScalingConfig, name: str):
                                observer=f7.observer, options=opts)
         return fn, 0, (Film(*flat[:5]), flat[5], flat[6]), flat[0].size
     if name == "ibl_filtered":
-        from ..envmap import load_envmap
-        from ..ibl import REALTIME_OPTIONS
-        from ..prefilter import prefilter_envmap
+        from ..shading.envmap import load_envmap
+        from ..shading.ibl import REALTIME_OPTIONS
+        from ..shading.prefilter import prefilter_envmap
 
         env = load_envmap(cfg.envmap)
         pref = prefilter_envmap(env, observer=OBSERVER)
@@ -101,7 +102,7 @@ def _inputs(cfg: ScalingConfig, name: str):
                                options=opts, subdivisions=None)
         return fn, (0, 0, None, None, None), (film, pts, 0.25, wo, pref), len(pts)
     if name == "thickness_map":
-        from ..reflectance import rgb_reflectance
+        from ..spectral.reflectance import rgb_reflectance
 
         m = cfg.map_resolution
         y, x = np.meshgrid(np.linspace(0, 1, m), np.linspace(0, 1, m), indexing="ij")
@@ -121,7 +122,7 @@ def run_child(cfg: ScalingConfig, k: int, npz_path: str) -> dict:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from ..sharding import map_sharded, to_host
+    from ..core.sharding import map_sharded, to_host
     from ._timing import environment
 
     rows, outs = {}, {}
@@ -166,7 +167,7 @@ def _diff_eps(a: np.ndarray, ref: np.ndarray) -> float:
 
 def run_scaling(cfg: ScalingConfig = ScalingConfig(), out_dir="figures") -> dict:
     """Run the workloads on every device count; write scaling.json and scaling.md."""
-    from .._io import atomic_write, write_json
+    from ..core._io import atomic_write, write_json
     from ._timing import jsonable
 
     if any(k < 1 for k in cfg.devices):

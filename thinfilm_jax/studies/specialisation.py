@@ -38,12 +38,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import atomic_write, write_json
-from ..film import Film
-from ..kernels import filtered_kernel, ideal_kernel, lobe_moments
-from ..lut import build_shat_lut
-from ..reflectance import bare_bands, rgb_reflectance
-from ..spectra import Observer, get_observer
+from ..core._io import atomic_write, write_json
+from ..core.film import Film
+from ..realtime.kernels import filtered_kernel, ideal_kernel, lobe_moments
+from ..spectral.lut import build_shat_lut
+from ..spectral.reflectance import bare_bands, rgb_reflectance
+from ..spectral.spectra import Observer, get_observer
 from ._common import MATERIALS, SB, BenchConfig, error_stats, view_vector
 from ._timing import environment, fmt, jsonable, log, time_call
 

@@ -19,18 +19,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._io import atomic_write
-from ..airy import airy_reflectance
-from ..film import Film
-from ..filtered import filtered_bands
-from ..lut import build_shat_lut, lookup
-from ..microfacet import albedo
-from ..opd import OPDMoments, cos_incidence_from_projection, opd_of_cos, taylor_opd_moments
-from ..options import ModelOptions
-from ..patch import patch_radiance
-from ..reflectance import rgb_reflectance
-from ..series import series_terms
-from ..spectra import gaussian_fit_error, sensitivity_ft, shat_at_zero, shat_host
+from ..core._io import atomic_write
+from ..optics.airy import airy_reflectance
+from ..core.film import Film
+from ..realtime.filtered import filtered_bands
+from ..spectral.lut import build_shat_lut, lookup
+from ..brdf.microfacet import albedo
+from ..optics.opd import OPDMoments, cos_incidence_from_projection, opd_of_cos, taylor_opd_moments
+from ..realtime.options import ModelOptions
+from ..shading.patch import patch_radiance
+from ..spectral.reflectance import rgb_reflectance
+from ..optics.series import series_terms
+from ..spectral.spectra import gaussian_fit_error, sensitivity_ft, shat_at_zero, shat_host
 from ._common import CIE, MATERIALS, SB
 from ._timing import as_dtype, environment, fmt, log, take
 from .stiff import (

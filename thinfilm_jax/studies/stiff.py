@@ -29,8 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..film import Film
-from ..spectra import get_observer
+from ..core.film import Film
+from ..spectral.spectra import get_observer
 from .peers import numpy_airy, tmm_unpolarised
 
 STIFF_THICKNESS = (0.0, 1e-6, 500.0, 1e4, 1e5)  # nm

@@ -1,0 +1,463 @@
+"""``thinfilm-jax fit OBSERVATIONS [--out PATH] [--overwrite]``: fit a film to observations.
+
+Everything the fit needs is read from the observations file (CSV or JSON); the result is
+written atomically as JSON, by default next to the input as ``<stem>.fit.json``, and an
+existing result is never replaced unless ``--overwrite`` is given.
+
+Two kinds of observations (chosen by the columns / keys present):
+
+**Patch colours** (`thinfilm_jax.fit.film_fit.fit_film`): band radiances of a patch under uniform
+light at several view angles, as `patch_radiance` returns them.
+
+* CSV: columns ``theta_o_deg,R,G,B`` (``X,Y,Z`` with ``observer = cie_1931_2``), one row
+  per view angle; optional column ``sigma`` (standard deviation of that row's bands).
+* JSON: ``{"theta_o_deg": [...], "observed": [[R, G, B], ...], ...settings}``; optional
+  ``"sigma"`` (scalar or same shape as ``observed``).
+* required setting: ``alpha`` (GGX α; the initial guess if ``"alpha"`` is free).
+
+**Reflectance spectra** (`thinfilm_jax.fit.film_fit.fit_spectrum`): unpolarised R(λ) at one or more
+angles of incidence.
+
+* CSV: columns ``wavelength_nm,R`` and, for several angles, ``theta_deg`` (long format:
+  one row per (angle, wavelength); every angle must have the same wavelengths); a single
+  angle may instead be given as the setting ``theta_deg = 0``.
+* JSON: ``{"wavelength_nm": [...], "theta_deg": [...], "R": [[...], ...]}`` (R has one
+  row per angle); optional ``"sigma"``.
+
+**Settings** (JSON keys, or CSV comment lines ``# key = value`` above the header, the
+value JSON or a bare word / comma list; a ``# key = value`` line below the header is an
+error, not silently ignored). Files are UTF-8 (a byte-order mark is allowed; UTF-16 with a
+byte-order mark is read too).
+
+* ``initial``: ``{"thickness": nm, "eta_film": ..., "eta_base": ..., "kappa_base": 0,
+  "eta_outer": 1}``; ``eta_film`` and ``eta_base`` are required (fixed values or initial
+  guesses), thickness defaults to 500 nm, κ₃ to 0, η₁ to 1.
+* ``free``: parameters to fit (default ``thickness``): `Film` fields, and ``alpha`` for
+  patches.
+* optional: ``method`` (default ``reference``), ``refine_method``, ``observer``
+  (``stiles_burch_1959_10`` or ``cie_1931_2``), ``bounds`` (``{"thickness": [0, 2000]}``),
+  ``solver``, ``n_starts``, ``n_solves``, ``max_steps``, ``quadrature`` (``[16, 16]``),
+  ``absolute_sigma``.
+
+Example CSV::
+
+    # alpha = 0.25
+    # initial = {"thickness": 400, "eta_film": 1.3, "eta_base": 2.0, "kappa_base": 0.5}
+    # free = thickness, eta_film
+    theta_o_deg,R,G,B
+    0,0.04368,0.09424,0.04756
+    10,0.04123,0.09212,0.04942
+    ...
+
+The output may not be the input file itself nor a directory (checked before fitting); it is
+written atomically, so an interrupted run (Ctrl-C) leaves no partial file.
+
+The output JSON holds the input path, the kind, the settings used and the `FitResult`
+summary (`FitResult.to_dict`: fitted film, α, free parameters with standard errors,
+correlation matrix, degenerate pairs, loss, convergence, residuals).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import re
+from pathlib import Path
+
+#: Help text for the ``fit`` sub-command (argparse, RawDescriptionHelpFormatter).
+FIT_HELP = """\
+Fit film thickness, IORs and roughness to observations read from CSV or JSON and write the
+result as JSON (default: <stem>.fit.json next to the input; never overwritten without
+--overwrite).
+
+patch colours: CSV columns theta_o_deg,R,G,B [,sigma] (X,Y,Z with observer=cie_1931_2), or
+  JSON {"theta_o_deg": [...], "observed": [[R,G,B], ...]}; setting alpha required.
+spectra: CSV columns wavelength_nm,R [,theta_deg] (long format), or
+  JSON {"wavelength_nm": [...], "theta_deg": [...], "R": [[...], ...]}.
+settings: JSON keys or CSV comment lines '# key = value' above the header (UTF-8):
+  initial = {"thickness": 400, "eta_film": 1.3, "eta_base": 2.0, "kappa_base": 0.5}
+  free = thickness, eta_film     (Film fields and, for patches, alpha; default thickness)
+  method = reference | filtered | ...   refine_method, observer, bounds, solver,
+  n_starts, n_solves, max_steps, quadrature, absolute_sigma (optional)."""
+
+SETTINGS = ("alpha", "initial", "free", "method", "refine_method", "observer", "bounds",
+            "solver", "n_starts", "n_solves", "max_steps", "quadrature", "absolute_sigma",
+            "theta_deg", "sigma", "kind")
+INITIAL_KEYS = ("thickness", "eta_film", "eta_base", "kappa_base", "eta_outer")
+INITIAL_DEFAULTS = {"thickness": 500.0, "kappa_base": 0.0, "eta_outer": 1.0}
+BAND_COLUMNS = {"stiles_burch_1959_10": ("R", "G", "B"), "cie_1931_2": ("X", "Y", "Z")}
+
+
+def _fail(path, msg):
+    raise SystemExit(f"thinfilm-jax fit: {path}: {msg}")
+
+
+def _number(path, where, text):
+    try:
+        v = float(text)
+    except (TypeError, ValueError):
+        _fail(path, f"{where}: {text!r} is not a number")
+    if not math.isfinite(v):
+        _fail(path, f"{where}: value {text!r} is not finite (NaN/inf)")
+    return v
+
+
+def _parse_setting(text):
+    text = text.strip()
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        pass
+    if "," in text:
+        return [t.strip() for t in text.split(",") if t.strip()]
+    return text
+
+
+# ----------------------------------------------------------------------------- readers
+def read_text(path: Path) -> str:
+    """The text of `path`: UTF-8 (optional BOM) or UTF-16 with a BOM; else a clear error."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        _fail(path, f"cannot read: {e.strerror or e}")
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return data.decode("utf-16")
+        except UnicodeDecodeError as e:
+            _fail(path, f"invalid UTF-16 text at byte {e.start}")
+    if b"\x00" in data:  # valid UTF-8 in principle, never in a text file
+        _fail(path, "holds NUL bytes: looks like UTF-16 without a byte-order mark (or a "
+                    "binary file); save it as UTF-8")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        _fail(path, f"not UTF-8 text: byte 0x{data[e.start]:02x} on line {line} cannot be "
+                    f"decoded; save the file as UTF-8")
+
+
+_SETTING_LINE = re.compile(r"^#+\s*([A-Za-z_][A-Za-z0-9_]*)\s*=")
+
+
+def read_csv(path: Path) -> dict:
+    """Observations and settings of a CSV file as the dict a JSON file would give."""
+    settings, rows, header = {}, [], None
+    for lineno, line in enumerate(read_text(path).splitlines(), 1):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            body = s.lstrip("#").strip()
+            if header is not None and _SETTING_LINE.match(s):
+                _fail(path, f"line {lineno}: setting {s!r} below the header line; settings "
+                            f"('# key = value') must come before the header")
+            if "=" in body and header is None:
+                key, val = body.split("=", 1)
+                settings[key.strip()] = _parse_setting(val)
+            continue
+        cells = next(csv.reader([s]))
+        if header is None:
+            header = [c.strip() for c in cells]
+            continue
+        if len(cells) != len(header):
+            _fail(path, f"line {lineno}: {len(cells)} values for {len(header)} columns "
+                        f"{header}")
+        rows.append((lineno, dict(zip(header, (c.strip() for c in cells)))))
+    if header is None:
+        _fail(path, "no header line (expected columns theta_o_deg,R,G,B or wavelength_nm,R)")
+    if len(set(header)) != len(header):
+        _fail(path, f"duplicate column names in header {header}")
+    if not rows:
+        _fail(path, "no data rows")
+
+    def column(name):
+        return [_number(path, f"line {ln}, column {name!r}", r[name]) for ln, r in rows]
+
+    obs = dict(settings)
+    if "wavelength_nm" in header:
+        for c in ("R",):
+            if c not in header:
+                _fail(path, f"missing column {c!r} (spectra need wavelength_nm,R[,theta_deg])")
+        lam, refl = column("wavelength_nm"), column("R")
+        sig = column("sigma") if "sigma" in header else None
+        if "theta_deg" in header:
+            theta = column("theta_deg")
+        else:
+            if "theta_deg" not in settings:
+                _fail(path, "missing column 'theta_deg' (or setting '# theta_deg = ...')")
+            t = settings["theta_deg"]
+            if isinstance(t, list):
+                _fail(path, "setting theta_deg must be one angle when the CSV has no "
+                            "theta_deg column")
+            theta = [_number(path, "setting theta_deg", t)] * len(lam)
+        angles = sorted(set(theta))
+        grid = {}
+        for i, (t, w) in enumerate(zip(theta, lam)):
+            if (t, w) in grid:
+                _fail(path, f"line {rows[i][0]}: duplicate (theta_deg, wavelength_nm) = "
+                            f"({t}, {w})")
+            grid[(t, w)] = i
+        lams = sorted({w for t, w in grid if t == angles[0]})
+        for t in angles:
+            if sorted(w for tt, w in grid if tt == t) != lams:
+                _fail(path, f"theta_deg = {t}: the wavelengths differ from those of theta_deg "
+                            f"= {angles[0]}; every angle needs the same wavelength_nm values")
+        obs.update(kind=settings.get("kind", "spectrum"), wavelength_nm=lams, theta_deg=angles,
+                   R=[[refl[grid[(t, w)]] for w in lams] for t in angles])
+        if sig is not None:
+            obs["sigma"] = [[sig[grid[(t, w)]] for w in lams] for t in angles]
+        return obs
+    if "theta_o_deg" not in header:
+        _fail(path, f"missing column 'theta_o_deg' (patch colours) or 'wavelength_nm' "
+                    f"(spectra); header is {header}")
+    observer = settings.get("observer", "stiles_burch_1959_10")
+    bands = BAND_COLUMNS.get(observer)
+    if bands is None:
+        _fail(path, f"unknown observer {observer!r}; expected one of {list(BAND_COLUMNS)}")
+    for c in bands:
+        if c not in header:
+            _fail(path, f"missing column {c!r}: observer {observer} needs columns "
+                        f"theta_o_deg,{','.join(bands)}")
+    cols = [column(c) for c in bands]
+    obs.update(kind=settings.get("kind", "patch"), theta_o_deg=column("theta_o_deg"),
+               observed=[list(v) for v in zip(*cols)])
+    if "sigma" in header:
+        s = column("sigma")
+        obs["sigma"] = [[v] * len(bands) for v in s]
+    return obs
+
+
+def read_json(path: Path) -> dict:
+    try:
+        obs = json.loads(read_text(path))
+    except json.JSONDecodeError as e:
+        _fail(path, f"not valid JSON: {e}")
+    if not isinstance(obs, dict):
+        _fail(path, "the JSON must be an object with keys theta_o_deg/observed or "
+                    "wavelength_nm/R plus settings")
+    if "kind" not in obs:
+        obs["kind"] = "spectrum" if "wavelength_nm" in obs else "patch"
+    return obs
+
+
+def read_observations(path) -> dict:
+    """Read a CSV (``.csv``) or JSON (``.json``) observations file (module docstring).
+
+    Example (patch colours at two view angles, a setting in a comment line):
+        >>> import pathlib, tempfile
+        >>> with tempfile.TemporaryDirectory() as tmp:
+        ...     path = pathlib.Path(tmp, "obs.csv")
+        ...     _ = path.write_text("# alpha = 0.25\\ntheta_o_deg,R,G,B\\n0,0.12,0.2,0.3\\n"
+        ...                         "40,0.2,0.2,0.1\\n")
+        ...     obs = read_observations(path)
+        >>> obs["kind"], obs["alpha"], obs["theta_o_deg"], obs["observed"][1]
+        ('patch', 0.25, [0.0, 40.0], [0.2, 0.2, 0.1])
+    """
+    path = Path(path)
+    if not path.exists():
+        _fail(path, "no such file")
+    if not path.is_file():
+        _fail(path, "not a file")
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return read_csv(path)
+    if suffix == ".json":
+        return read_json(path)
+    _fail(path, f"unknown file type {suffix!r}; expected .csv or .json")
+
+
+# ----------------------------------------------------------------------------- checks
+def _array(path, name, value, ndim):
+    import numpy as np
+
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        _fail(path, f"{name!r} must be a rectangular array of numbers, got {str(value)[:80]}")
+    if a.ndim not in np.atleast_1d(ndim):
+        _fail(path, f"{name!r} must be {ndim}-D, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        idx = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
+        _fail(path, f"{name!r} holds a non-finite value (NaN/inf) at index {idx}")
+    return a
+
+
+def _in_range(path, name, a, lo, hi, unit=""):
+    import numpy as np
+
+    bad = (a < lo) | (a > hi)
+    if np.any(bad):
+        _fail(path, f"{name} = {a[bad].flat[0]!r} lies outside [{lo}, {hi}]{unit}")
+
+
+def _settings(path, obs, kind):
+    unknown = [k for k in obs if k not in SETTINGS and k not in
+               ("theta_o_deg", "observed", "wavelength_nm", "R")]
+    if unknown:
+        _fail(path, f"unknown key(s) {unknown}; settings are {list(SETTINGS)}")
+    init = obs.get("initial")
+    if not isinstance(init, dict):
+        _fail(path, "missing setting 'initial' (an object with at least eta_film and eta_base, "
+                    "e.g. {\"eta_film\": 1.3, \"eta_base\": 2.0, \"kappa_base\": 0.5})")
+    bad = [k for k in init if k not in INITIAL_KEYS]
+    if bad:
+        _fail(path, f"initial: unknown field(s) {bad}; expected {list(INITIAL_KEYS)}")
+    film = {}
+    for k in INITIAL_KEYS:
+        if k in init:
+            film[k] = _number(path, f"initial.{k}", init[k])
+        elif k in INITIAL_DEFAULTS:
+            film[k] = INITIAL_DEFAULTS[k]
+        else:
+            _fail(path, f"initial: missing field {k!r}")
+    free = obs.get("free", ["thickness"])
+    free = [free] if isinstance(free, str) else free
+    if not (isinstance(free, list) and all(isinstance(k, str) for k in free)):
+        _fail(path, f"free must be a list of parameter names, got {free!r}")
+    kw = {"free": tuple(free)}
+    for k in ("method", "refine_method", "observer", "solver"):
+        if obs.get(k) is not None:
+            kw[k] = str(obs[k])
+    for k in ("n_starts", "n_solves", "max_steps"):
+        if k in obs:
+            v = obs[k]
+            if not (isinstance(v, int) and not isinstance(v, bool) and v >= 1):
+                _fail(path, f"{k} must be a positive integer, got {v!r}")
+            kw[k] = v
+    if "quadrature" in obs:
+        q = obs["quadrature"]
+        q = [q, q] if isinstance(q, int) else q
+        if not (isinstance(q, list) and len(q) == 2 and all(isinstance(v, int) and v >= 2
+                                                             for v in q)):
+            _fail(path, f"quadrature must be an int or a pair of ints >= 2, got {q!r}")
+        if kind != "patch":
+            _fail(path, "quadrature applies to patch fits only")
+        kw["quadrature"] = tuple(q)
+    if "absolute_sigma" in obs:
+        if not isinstance(obs["absolute_sigma"], bool):
+            _fail(path, f"absolute_sigma must be true or false, got {obs['absolute_sigma']!r}")
+        kw["absolute_sigma"] = obs["absolute_sigma"]
+    if "bounds" in obs:
+        b = obs["bounds"]
+        if not isinstance(b, dict):
+            _fail(path, f"bounds must be an object {{name: [lo, hi]}}, got {b!r}")
+        kw["bounds"] = {k: tuple(_number(path, f"bounds.{k}", t) for t in v)
+                        if isinstance(v, list) and len(v) == 2
+                        else _fail(path, f"bounds.{k} must be [lo, hi], got {v!r}")
+                        for k, v in b.items()}
+    if kind == "spectrum":
+        for k in ("method", "refine_method", "observer"):
+            if k in kw:
+                _fail(path, f"setting {k!r} applies to patch fits only")
+    return film, kw
+
+
+# ----------------------------------------------------------------------------- main
+def _call_kw(kw, options_cls):
+    """Settings → keyword arguments of the fit: `free`, `method` stay keywords, the rest
+    becomes its `FitOptions` (invalid values raise ValueError, reported as file errors)."""
+    call = {k: kw[k] for k in ("free", "method") if k in kw}
+    call["options"] = options_cls(**{k: v for k, v in kw.items() if k not in call})
+    return call
+
+
+def check_output(path: Path, out: Path, overwrite: bool) -> None:
+    """Refuse, before any work, an output that is the input, a directory, below a file, or
+    (without `overwrite`) an existing file."""
+    if out.exists() or out.is_symlink():
+        if out.is_dir():
+            raise SystemExit(f"thinfilm-jax fit: --out {out} is a directory; give a file path "
+                             f"such as {out / (path.stem + '.fit.json')}")
+        if path.exists() and out.exists() and os.path.samefile(path, out):
+            raise SystemExit(f"thinfilm-jax fit: --out {out} is the input file; refusing to "
+                             f"replace the observations with the result")
+        if not overwrite:
+            raise SystemExit(f"thinfilm-jax fit: {out} exists; pass --overwrite to replace it")
+    for parent in out.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise SystemExit(f"thinfilm-jax fit: --out {out}: {parent} is not a directory")
+            if not os.access(parent, os.W_OK | os.X_OK) and parent == out.absolute().parent:
+                raise SystemExit(f"thinfilm-jax fit: --out {out}: cannot write in {parent}")
+            break
+
+
+def run_fit_cli(args) -> int:
+    """Entry point of ``thinfilm-jax fit`` (args.observations, args.out, args.overwrite)."""
+    import numpy as np
+
+    path = Path(args.observations)
+    out = Path(args.out) if getattr(args, "out", None) else path.with_name(path.stem + ".fit.json")
+    check_output(path, out, getattr(args, "overwrite", False))
+    obs = read_observations(path)
+    kind = obs.get("kind")
+    if kind not in ("patch", "spectrum"):
+        _fail(path, f"kind must be 'patch' or 'spectrum', got {kind!r}")
+    film_kw, kw = _settings(path, obs, kind)
+
+    from ..core._io import write_json
+    from ..core.film import Film
+    from ..fit.film_fit import FitOptions, fit_film, fit_spectrum
+
+    initial = Film(**film_kw)
+    sigma = obs.get("sigma")
+    if sigma is not None:
+        sigma = np.asarray(sigma, float) if isinstance(sigma, list) else \
+            _number(path, "sigma", sigma)
+        if not np.all(np.isfinite(sigma)) or np.any(np.asarray(sigma) <= 0):
+            _fail(path, "sigma must be finite and > 0")
+    try:
+        if kind == "patch":
+            for k in ("theta_o_deg", "observed"):
+                if k not in obs:
+                    _fail(path, f"missing {k!r} (patch observations need theta_o_deg and "
+                                f"observed)")
+            if "alpha" not in obs:
+                _fail(path, "missing setting 'alpha' (GGX roughness in (0, 1])")
+            theta = _array(path, "theta_o_deg", obs["theta_o_deg"], 1)
+            _in_range(path, "theta_o_deg", theta, 0.0, 90.0, " degrees")
+            observed = _array(path, "observed", obs["observed"], 2)
+            alpha = _number(path, "alpha", obs["alpha"])
+            if not 0.0 < alpha <= 1.0:
+                _fail(path, f"alpha = {alpha!r} lies outside (0, 1]")
+            res = fit_film(observed, np.deg2rad(theta), alpha=alpha, initial=initial,
+                           sigma=sigma, **_call_kw(kw, FitOptions))
+            data = {"theta_o_deg": theta.tolist(), "observed": observed.tolist()}
+        else:
+            for k in ("wavelength_nm", "R"):
+                if k not in obs:
+                    _fail(path, f"missing {k!r} (spectra need wavelength_nm and R)")
+            lam = _array(path, "wavelength_nm", obs["wavelength_nm"], 1)
+            if np.any(lam <= 0):
+                _fail(path, f"wavelength_nm = {lam[lam <= 0][0]!r} must be > 0 (nm)")
+            theta = _array(path, "theta_deg", obs.get("theta_deg", [0.0]), 1)
+            _in_range(path, "theta_deg", theta, 0.0, 90.0, " degrees")
+            refl = _array(path, "R", obs["R"], (1, 2))
+            res = fit_spectrum(refl, lam, np.cos(np.deg2rad(theta)), initial=initial,
+                               sigma=sigma, **_call_kw(kw, FitOptions))
+            data = {"wavelength_nm": lam.tolist(), "theta_deg": theta.tolist(),
+                    "R": np.atleast_2d(refl).tolist()}
+    except (ValueError, TypeError) as e:
+        _fail(path, str(e))
+    summary = res.to_dict()
+    settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in kw.items()}
+    write_json(out, {"input": str(path), "kind": kind, "initial": film_kw,
+                     "settings": settings, "data": data, "result": summary})
+    p = summary["params"]
+    err = summary["stderr"]
+    print(f"{kind} fit of {path.name}: " + ", ".join(f"{k} = {p[k]:.6g} ± {err[k]:.2g}"
+                                                    for k in p)
+          + f"; loss {summary['loss']:.3g}, converged {summary['converged']}")
+    for ru in summary["runner_ups"]:
+        print("runner-up minimum: " + ", ".join(f"{k} = {v:.6g}" for k, v in ru["params"].items())
+              + f"; loss {ru['loss']:.3g} (Δχ² = {ru['dchi2']:.3g})")
+    if summary["ambiguous"]:
+        print("AMBIGUOUS: a runner-up minimum (another fringe order) fits almost as well "
+              "(Δχ² < 9); the data cannot tell them apart")
+    if summary["degenerate"]:
+        print("strongly correlated (|corr| > 0.95): "
+              + ", ".join(f"{a}/{b}" for a, b in summary["degenerate"]))
+    print(f"wrote {out}")
+    return 0

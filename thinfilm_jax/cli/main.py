@@ -1,0 +1,189 @@
+"""Command line: ``thinfilm-jax figure7 | bench | render | fit | fit-map`` (also
+``python -m thinfilm_jax``)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+
+from ._checks import _add_device_options, _devices, _enable_x64
+
+
+def _figure7(args) -> int:
+    devices = _devices(args)
+    _enable_x64()
+    from ..studies.figure7 import Figure7Config, run_figure7
+
+    fields = {f.name for f in dataclasses.fields(Figure7Config)}
+    cfg = Figure7Config(**{k: tuple(v) if isinstance(v, list) else v
+                           for k, v in vars(args).items() if k in fields and v is not None})
+    summary = run_figure7(cfg, out_dir=args.out, progress=not args.quiet, devices=devices)
+    print(f"wrote {args.out}/figure7.png, figure7_error.png, figure7.json, figure7.npz "
+          f"in {summary['compute_seconds']:.1f} s")
+    print(f"{'row/method':40s} {'ΔE mean':>8s} {'ΔE p95':>8s} {'ΔE max':>8s}")
+    for k, v in summary["errors_vs_reference"].items():
+        print(f"{k:40s} {v['dE2000_mean']:8.3f} {v['dE2000_p95']:8.3f} {v['dE2000_max']:8.3f}")
+    return 0
+
+
+def _bench(args) -> int:
+    _enable_x64()
+    if args.suite in ("core", "all"):
+        from ..studies.bench import run_bench
+
+        run_bench(out=args.out, quick=args.quick)
+    if args.suite in ("ibl", "all"):
+        from ..studies.ibl_bench import run_ibl_bench
+
+        run_ibl_bench(out=args.out, quick=args.quick)
+    if args.suite in ("scaling", "all"):
+        from ..studies.scaling import QUICK, ScalingConfig, format_table, run_scaling
+
+        cfg = ScalingConfig(**(QUICK if args.quick else {}))
+        print(format_table(run_scaling(cfg, out_dir=args.out)))
+    if args.suite in ("improved", "all"):
+        from ..studies.improved_study import StudyConfig, run
+
+        run(StudyConfig.quick() if args.quick else StudyConfig(), out=args.out)
+    return 0
+
+
+def _render(args) -> int:
+    devices = _devices(args)
+    _enable_x64()
+    from ..studies.render import RenderConfig, run_render, summary_table
+
+    kw = {k: tuple(v) for k, v in (("envmaps", args.envmap), ("scenes", args.scene),
+                                   ("methods", args.method), ("alphas", args.alphas)) if v}
+    if args.alphas and not all(0 < a <= 1 for a in args.alphas):
+        raise ValueError(f"--alphas must lie in (0, 1], got {args.alphas}")
+    cfg = RenderConfig(resolution=args.resolution, exposure=args.exposure,
+                       observer=args.observer, **kw)
+    summary = run_render(cfg, out_dir=args.out, progress=not args.quiet, devices=devices)
+    print(f"wrote {args.out}/ibl_{{{','.join(cfg.scenes)}}}.png, ibl_render.json, ibl_render.npz")
+    print(summary_table(summary))
+    return 0
+
+
+def _fit(args) -> int:
+    _enable_x64()
+    from .fit import run_fit_cli
+
+    return run_fit_cli(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``thinfilm-jax`` parser; a sub-command's unset options stay None (the study's defaults
+    apply, SPEC §7).
+
+    Example:
+        >>> args = build_parser().parse_args(["figure7", "--resolution", "32"])
+        >>> args.command, args.resolution, args.out, args.thickness
+        ('figure7', 32, 'figures', None)
+    """
+    from .. import __version__
+
+    p = argparse.ArgumentParser(prog="thinfilm-jax", description=__doc__)
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    f7 = sub.add_parser("figure7", help="reproduce Figure 7 of Kneiphof et al. 2019",
+                        description="Render the eight panels (a)-(h) and the ΔE error maps into "
+                                    "--out (figure7.png, figure7_error.png, figure7.json, "
+                                    "figure7.npz). Defaults follow SPEC §7.")
+    f7.add_argument("--out", default="figures", help="output folder (default: figures)")
+    f7.add_argument("--resolution", type=int, help="pixels per panel side (default 64; paper 256)")
+    f7.add_argument("--eta-film", dest="eta_film", type=float, help="film IOR η₂ (1.3)")
+    f7.add_argument("--eta-base", dest="eta_base", type=float, help="base IOR η₃ (2.0)")
+    f7.add_argument("--kappa-base", dest="kappa_base", type=float, help="base κ₃ (0.5)")
+    f7.add_argument("--thickness", type=float, help="film thickness of row (a)-(d), nm (600)")
+    f7.add_argument("--alpha", type=float, help="GGX α of row (e)-(h) (0.25)")
+    f7.add_argument("--thickness-max", dest="thickness_max", type=float,
+                    help="largest thickness of row (e)-(h), nm (1000)")
+    f7.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"])
+    f7.add_argument("--terms", type=int, help="Fourier orders M of the real-time methods (2)")
+    f7.add_argument("--quadrature", type=int, nargs=2, metavar=("N_U", "N_PHI"),
+                    help="half-vector quadrature orders (n_u, n_phi) (32 32)")
+    f7.add_argument("--shat", choices=["exact", "lut", "gaussian"],
+                    help="filtered Ŝ source of K 29 (exact)")
+    f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")
+    f7.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_device_options(f7)
+    f7.set_defaults(func=_figure7)
+
+    b = sub.add_parser("bench", help="error against run time of every method and peers",
+                       description="Time every evaluation path (compile time separate from warm "
+                                   "run time) and measure its error; print a table, write JSON.")
+    b.add_argument("--out", default="figures", help="output folder (default: figures)")
+    b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
+    b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "all"],
+                   default="core",
+                   help="core: error vs run time, peers, specialisation (default); ibl: the "
+                        "2560×1440 IBL frame and the real-time options' errors; scaling: the "
+                        "large jobs on 1, 2 and 4 devices (subprocesses); improved: "
+                        "method='improved' against filtered (regions, IBL renders, "
+                        "kernel cost, Pareto); all: the four")
+    b.set_defaults(func=_bench)
+
+    from ..shading.envmap import SHIPPED
+
+    rd = sub.add_parser("render", help="spheres under environment maps (Kneiphof Figs. 3-6)",
+                        description="Render spheres under environment maps with the chosen "
+                                    "methods side by side (improved shades the map's suns "
+                                    "apart), with CIEDE2000 maps; writes ibl_<scene>.png, "
+                                    "ibl_render.json and ibl_render.npz into --out (SPEC §9).")
+    rd.add_argument("--envmap", action="append", metavar="PATH_OR_NAME",
+                    help=f"a .hdr/.exr file or a shipped map {sorted(SHIPPED)} (repeatable; "
+                         "default: the four shipped maps)")
+    rd.add_argument("--scene", action="append", choices=["fig4", "fig3", "varying"],
+                    help="fig4: α=0.25, d=600 nm, η₂=1.2, η₃=2.0; fig3: roughness sweep, "
+                         "η₂=1.3, η₃=2.0+0.5i, d=650 nm; varying: thickness texture "
+                         "(repeatable; default all)")
+    rd.add_argument("--method", action="append",
+                    choices=["reference", "mc", "ideal", "filtered", "improved"],
+                    help="methods, in columns (repeatable; default reference, ideal, "
+                         "filtered, improved)")
+    rd.add_argument("--alphas", type=float, nargs="+", help="α of the fig3 sweep "
+                    "(0.05 0.15 0.3 0.6)")
+    rd.add_argument("--resolution", type=int, default=64, help="pixels per sphere side (64)")
+    rd.add_argument("--exposure", type=float, help="display exposure (default: per row, the "
+                    "reference's 99th-percentile luminance to 0.9)")
+    rd.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"],
+                    default="stiles_burch_1959_10")
+    rd.add_argument("--out", default="figures", help="output folder (default: figures)")
+    rd.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_device_options(rd)
+    rd.set_defaults(func=_render)
+
+    from . import fit as fit_cli
+
+    ft = sub.add_parser("fit", help="fit film parameters to observed patch colours or spectra",
+                        description=fit_cli.__doc__,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    ft.add_argument("observations", help="CSV or JSON file of observations")
+    ft.add_argument("--out", required=False, help="result JSON path")
+    ft.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    ft.set_defaults(func=_fit)
+
+    from . import fit_map as fit_map_cli
+
+    fit_map_cli.add_parser(sub)
+    return p
+
+
+def main(argv=None) -> int:
+    from ._checks import check_args, run_command
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    check_args(parser, args)  # out-of-range options: usage error before any work
+    from ..core.compilation_cache import enable_compilation_cache
+
+    enable_compilation_cache()  # opt out: THINFILM_JAX_NO_CACHE=1
+    return run_command(args)  # Ctrl-C and bad input found later: one line, no traceback
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,122 @@
+r"""Filtered band reflectance for a Gaussian distribution of the optical path (K 19, K 29).
+
+$$ \int p_R R_j \approx C_0^* + \sum_{m=1}^{M} C_m^*\left[e^{im\varphi_2^*}\hat S_j(-m\mu_D, m^2\sigma_D^2)
+   + e^{-im\varphi_2^*}\hat S_j(m\mu_D, m^2\sigma_D^2)\right], $$
+
+with C*_m, φ₂* the BB17 terms at the mean light direction (cos θ₁*, K 22) and Ŝ the
+Gaussian-filtered sensitivity, either exact (`shat="exact"`, SPEC §5 quadrature) or from
+the LUT (`shat="lut"`, `lut.ShatLUT`). Kneiphof et al. use M = 2.
+
+Example (σ_D = 0 is the BB17 Fourier sum K 4; a spread σ_D of many wavelengths averages the
+interference out, leaving the same C₀ in every band):
+    >>> import numpy as np
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.realtime.filtered import filtered_bands
+    >>> from thinfilm_jax.optics.opd import OPDMoments, opd_of_cos
+    >>> from thinfilm_jax.spectral.reflectance import fourier_bands
+    >>> film, c, obs = Film(600.0, 1.3, 2.0, 0.5), 0.8, "stiles_burch_1959_10"
+    >>> sharp = filtered_bands(film, c, OPDMoments(opd_of_cos(film, c), 0.0), obs)
+    >>> bool(np.allclose(sharp, fourier_bands(film, c, obs, terms=2)))
+    True
+    >>> wide = filtered_bands(film, c, OPDMoments(opd_of_cos(film, c), 1e4), obs)
+    >>> bool(np.ptp(np.asarray(wide)) < 1e-9)
+    True
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import Array
+
+from ..core.film import Film
+from ..spectral.lut import ShatLUT, read_parts
+from ..optics.opd import OPDMoments
+from ..optics.series import fourier_band_reflectance, fused_terms, series_terms
+from ..spectral.spectra import sensitivity_ft, shat_at_zero
+
+SHAT_SOURCES = ("exact", "lut", "gaussian")
+
+
+def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, terms: int = 2,
+                   shat: str = "exact", lut: ShatLUT | None = None,
+                   arithmetic: str = "complex", interpolation: str = "cubic",
+                   shat0: Array | None = None, light: Array | None = None) -> Array:
+    """K 29 band reflectance (..., J) for broadcast inputs (no validation; see patch.py).
+
+    `shat0`: Ŝ_j(0) (J,) of the C₀ term when `lut` holds bands that no observer name gives
+    (a light's colour folded into the cross bands, `sources.with_film_tables`); then
+    `observer` is not read.
+
+    `light` (..., K) with shat="lut" and a cross-band `observer` (`uplift`, J·K bands j·k):
+    returns Σ_k R_jk light_k (..., J), the band radiance under RGB light (SPEC §9), reading
+    the table one light channel at a time (K reads of J bands, which XLA fuses into the
+    kernel's loop; one read of J·K bands per tap does not fuse and moves ~8× the bytes).
+
+    `interpolation` is the LUT read (`lut.lookup`) when shat="lut". With ``opd.std=None``
+    the path is known to be exact (σ_D = 0, the `ideal` kernel): the LUT is read at σ = 0
+    only."""
+    if shat == "lut":
+        if light is not None:
+            return _lut_bands_under_light(film, cos_mean, opd, observer, terms, lut,
+                                          arithmetic, interpolation, light)
+        return _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic,
+                          interpolation, shat0)
+    if light is not None:
+        raise ValueError("filtered_bands: light= needs shat='lut' (the cross-band table)")
+    st = series_terms(film, cos_mean, arithmetic=arithmetic)
+    dtype = jnp.result_type(cos_mean, float)
+    mean, std = opd
+    std = jnp.zeros_like(mean) if std is None else std
+
+    def shat_m(m):
+        return sensitivity_ft(-m * mean, observer, sigma2=(m * std) ** 2, shat=shat)
+
+    s0 = shat_at_zero(observer, dtype, "gaussian" if shat == "gaussian" else "exact")
+    return jnp.mean(fourier_band_reflectance(st, shat_m, terms, s0), axis=0)
+
+
+def _lut_bands_under_light(film, cos_mean, opd, observer, terms, lut, arithmetic,
+                           interpolation, light):
+    """Σ_k light_k R_jk: the cross-band table split by light channel k (bands j·k, k
+    fastest), one J-band K 29 per channel; XLA shares the film terms between them."""
+    n_light = light.shape[-1]
+    s0 = shat_at_zero(observer, jnp.result_type(cos_mean, float), "exact")
+    out = None
+    for k in range(n_light):
+        lut_k = ShatLUT(lut.table[..., k::n_light], lut.carrier[k::n_light], lut.mu_max,
+                        lut.sigma_max)
+        r = _lut_bands(film, cos_mean, opd, observer, terms, lut_k, arithmetic,
+                       interpolation, s0[k::n_light]) * light[..., k:k + 1]
+        out = r if out is None else out + r
+    return out
+
+
+def _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic, interpolation,
+               shat0=None):
+    r"""K 29 with Ŝ from the LUT as one elementwise program (XLA fuses it into one loop).
+
+    The polarisation mean is taken before the bands: with W_m = Σ_{s,p} (R* − T₁₂₁) z^m
+    (complex, per shading point) and Ŝ(−mμ) = conj Ŝ(mμ),
+
+    $$ R_j = \tfrac12\sum_{s,p} C_0\,\hat S_j(0) + \sum_{m=1}^{M}
+       \operatorname{Re}\big(W_m\,\overline{\hat S_j(m\mu_D, m^2\sigma_D^2)}\big), $$
+
+    the same sum as `series.fourier_band_reflectance` (half the band work)."""
+    dtype = jnp.result_type(cos_mean, float)
+    ft = fused_terms(film, cos_mean, arithmetic=arithmetic)
+    mean, std = opd
+    s0 = shat_at_zero(observer, dtype, "exact") if shat0 is None else shat0.astype(dtype)
+    c0 = 0.5 * (ft.c0[0] + ft.c0[1])
+    w = []  # W_m on real parts
+    pr, pi = ft.z_re, ft.z_im  # z^m per polarisation
+    for m in range(1, terms + 1):
+        if m > 1:
+            pr, pi = (tuple(a * c - b * d for a, b, c, d in zip(pr, pi, ft.z_re, ft.z_im)),
+                      tuple(a * d + b * c for a, b, c, d in zip(pr, pi, ft.z_re, ft.z_im)))
+        w.append((ft.amp[0] * pr[0] + ft.amp[1] * pr[1], ft.amp[0] * pi[0] + ft.amp[1] * pi[1]))
+    out = c0[..., None] * jnp.reshape(s0, (1,) * c0.ndim + (-1,))
+    for m, (wr, wi) in enumerate(w, start=1):
+        sr, si = read_parts(lut, m * mean, None if std is None else m * std,
+                            interpolation=interpolation)
+        out = out + (wr[..., None] * sr + wi[..., None] * si)
+    return out

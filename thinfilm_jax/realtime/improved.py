@@ -1,0 +1,370 @@
+r"""The improved real-time filtered model (`method="improved"`, docs/improved.md): K 29 per quantile bin.
+
+Both `patch_radiance` and `envmap_radiance` call `improved_kernel`; it uses what `filtered`
+may use in real time (a table in (θ_o, α), the Ŝ LUT, the shading point's n, ω_o, α, film).
+
+**What is approximated.** Under a light lobe p (uniform light: p = p_R ∝ ρ̃⟨n,ω_i⟩, K 12) the
+film's band reflectance is an expectation over the microfacet incidence cosine
+c = cos θ₁ = ⟨h, ω_i⟩ alone (SPEC §7):
+
+$$ \bar R_j = \mathbb E_p\big[R_j(c)\big],\qquad
+   R_j(c) = C_0(c)\hat S_j(0) + \sum_{m=1}^{M} C_m(c)\big[e^{im\varphi_2(c)}\hat S_j(-mD(c))
+   + \text{c.c.}\big],\qquad D(c) = 2d\sqrt{\eta_2^2-\eta_1^2(1-c^2)} \quad (K\ 4, 5). $$
+
+K 29 replaces the distribution of c by one point, cos θ₁* of the mean light direction (K 22)
+for C_m, φ₂, and by a Gaussian on D (K 20–28). Both are poor where the distribution of c is
+wide and skewed (rough films, grazing views): C₀(c) is convex, so C₀(E c) ≠ E C₀(c) (a Jensen
+bias, the largest error of K 29), and D(c) inherits the skew.
+
+**The model.** Split the distribution of c into K bins of equal probability,
+B_k = [q_{(k−1)/K}, q_{k/K}] (q_t: the t-quantile of c under p), so that exactly
+
+$$ \bar R_j = \frac1K\sum_{k=1}^{K}\mathbb E\big[R_j(c)\,\big|\,c\in B_k\big]. $$
+
+Inside a bin c has mean c̄_k and standard deviation s_k ≪ the whole spread. Apply K 29 per
+bin: the BB17 terms at c̄_k (the Jensen error falls as s_k², i.e. by ~K² for a smooth
+density), and D Gaussian with the first-order moments of D(c) about c̄_k (K 25–28's Taylor
+chain, written in c):
+
+$$ \mu_{D,k} = D(\bar c_k),\qquad \sigma_{D,k} = |D'(\bar c_k)|\,s_k,\qquad
+   D'(c) = \frac{(2d)^2\eta_1^2\,c}{D(c)}, $$
+$$ \bar R_j \approx \frac1K\sum_{k=1}^{K}\Big\{C_0(\bar c_k)\hat S_j(0) + \sum_{m=1}^{M}
+   C_m(\bar c_k)\big[e^{im\varphi_2(\bar c_k)}\hat S_j(-m\mu_{D,k}, m^2\sigma_{D,k}^2)
+   + \text{c.c.}\big]\Big\}\qquad (\text{K 29 per bin}). $$
+
+The skewed mixture of K Gaussians on D follows the true distribution of D(c), and the C₀
+average is a K-point rule placed where the mass is. K = 3 is the default (measured: 1.1–1.2× the
+cost of `filtered` per shading point on a CPU before the kernels were written for XLA fusion,
+about 5× since: figures/kernel_bench.md; K = 2 is cheaper and about 1.6× less accurate,
+K = 4 more accurate and dearer: docs/improved.md); K = 1 is K 29 fed with the exact E[c],
+Var c of the lobe instead of ⟨ω_o, μ_ω⟩.
+
+**Table.** c̄_k − cos θ_o and s_k depend only on (θ_o, α) (and the NDF): `bin_table` computes
+them once on the host from the exact half-vector quadrature (`microfacet.patch_quadrature`,
+horizon clipping and the non-split-sum lobe included) on a uniform grid of (√cos θ_o, √α),
+the grid of the albedo table, and `lookup_bins` reads them bilinearly. Storing offsets from
+cos θ_o makes α → 0 exact: every bin collapses onto c = cos θ_o with s = 0, i.e. `ideal`.
+
+**Ŝ.** ``shat="lut"`` reads the Ŝ(μ, σ²) table of `lut` (the same table `filtered` reads)
+*bilinearly* in (|μ|, σ) (`lut.lookup(..., interpolation="linear")`), not bicubically: the table stores the slowly
+varying demodulated envelope (≳ 1 µm scale against Δμ = 25 nm), so the bilinear read is
+within 2e-3 of the exact Ŝ and about 10× cheaper on a CPU, which pays for the K bins.
+``"exact"`` and ``"gaussian"`` are as for `filtered_kernel`.
+
+**Under an environment** (`ibl.improved_envmap`, called by `envmap_radiance`) the light L(ω_i)
+weights the lobe, and the film–light coupling is what a split-sum method loses: a bright
+source at one c. The same bins split it exactly,
+
+$$ L_j = A\,\mathbb E_{p_R}\big[R(c)\,L(\omega_i)\big]
+       = \frac{A}{K}\sum_{k=1}^{K}\mathbb E\big[R(c)\,L(\omega_i)\,\big|\,c\in B_k\big]
+   \approx \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K} R(\bar c_k, s_k)\,
+       P(\omega_{\mu,k}, \alpha_{\mathrm{eff},k}), $$
+
+neglecting only the covariance of R and L inside a bin. P(ω, α) is the prefiltered radiance,
+read per bin at the mean light direction ω_μ,k of the bin's part of the lobe (in the plane
+of n and ω_r by symmetry, tabulated as h_k = sin β_k / sin θ_o, β_k its angle from n) and at
+the level α_eff,k whose normal-view lobe has the same total variance tr Σ_ω (`lookup_lobe`).
+An isotropic read stands for a compact part of the lobe, an arc across it (oblique views);
+near normal view the bins are rings round ω_o ≈ n, which a read centred on their mean (≈ n)
+misplaces. There the mean of the bins' reads is moved to the whole lobe's read (exact at
+θ_o = 0, where the lobe is the prefilter's own kernel) with the tabulated ring weight w:
+
+$$ P_k \leftarrow P_k + w\,\big(P(\omega_\mu, \alpha_\mathrm{eff})
+   - \tfrac1K\textstyle\sum_l P_l\big), $$
+
+so the bins keep only their differences (the coupling). The prefiltered moments are not
+needed; a constant environment gives the uniform-light model up to the prefilter's
+accuracy (measured 7.2e-5, asserted 1.2e-4: tests/test_ibl.py).
+
+Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
+0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,
+at 1.17× its cost per shading point (before the fused kernels; figures/kernel_bench.md now
+has about 5×); sphere renders under the four shipped maps 0.30 / 0.27 × (with the suns
+split and shaded apart, `sources`).
+Measured gains, cost and the regions where it is not better: docs/improved.md.
+
+Example:
+    >>> import jax.numpy as jnp
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.realtime.improved import bin_table, improved_kernel
+    >>> tab = bin_table(shape=(16, 9), quadrature=(24, 24))
+    >>> improved_kernel(Film(600.0, 1.3, 2.0, 0.5), 0.8, 0.25, tab, shat="exact").shape
+    (3,)
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from ..core.film import Film
+from .filtered import filtered_bands
+from ..optics.fresnel import safe_div, safe_sqrt
+from ..spectral.lut import ShatLUT
+from ..brdf.microfacet import PatchQuadrature, light_moments, patch_quadrature
+from ..optics.opd import OPDMoments, opd_of_cos
+from ..spectral.spectra import DEFAULT_OBSERVER
+
+__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "improved_bins",
+           "improved_bands", "improved_kernel"]
+
+DEFAULT_BINS = 3
+TABLE_SHAPE = (64, 33)  # (√cos θ_o, √α) nodes, as the albedo table
+TABLE_QUADRATURE = (96, 96)  # half-vector quadrature of the table build
+ALPHA_FLOOR = 1e-4  # quadrature floor of α (the √α = 0 column is the exact mirror limit)
+
+
+class BinTable(NamedTuple):
+    """Tables of the lobe p_R of uniform light (a pytree of arrays), on uniform grids of
+    √cos θ_o and √α ∈ [0, 1] (the √α = 0 column is the mirror limit):
+
+    stats: (n_u, n_a, 2, K): [0] offsets c̄_k − cos θ_o of the K equal-probability bin means
+        of c = cos θ₁, [1] the bin standard deviations s_k.
+    lobe: (n_u, n_a, 2, K + 1): for each bin's part of the lobe (the part whose c lies in
+        the bin) and, last, the whole lobe: [0] h = sin β / sin θ_o, with β the angle of its
+        mean light direction from n towards ω_r (h = 1: ω_r; h < 0: past n, towards ω_o;
+        the ratio is even in θ_o, so smooth at normal view), [1] √α_eff, the roughness whose
+        normal-view lobe has the same total variance tr Σ_ω (the prefiltered level to read).
+    ring: (n_u, n_a): w = 1 − (angle from ω_o to the whole lobe's mean direction) / (mean
+        angle ψ_k = arccos(2c̄_k² − 1) of the bins from ω_o), clipped to [0, 1]: 1 where the
+        bins are rings round ω_o (normal view), 0 where they are arcs across the lobe.
+    """
+
+    stats: Array
+    lobe: Array
+    ring: Array
+
+    @property
+    def bins(self) -> int:
+        return self.stats.shape[-1]
+
+    def astype(self, dtype) -> BinTable:
+        return BinTable(*(x.astype(dtype) for x in self))
+
+
+# ----------------------------------------------------------------------------- table
+def _bin_stats(theta_o, alpha, bins, quadrature, ndf):
+    """At one (θ_o, α): (c̄_k − cos θ_o, s_k) (2, K) of `bins` equal-mass bins of c under
+    p_R, and (sin β, tr Σ_ω) (2, K + 1) of each bin's part of the lobe and of the whole."""
+    q = patch_quadrature(theta_o, alpha, quadrature=quadrature, ndf=ndf)
+    order = jnp.argsort(q.cos_hi)
+    c, w, wi = q.cos_hi[order], q.weight[order], q.wi[order]
+    total = jnp.sum(w)
+    p = safe_div(w, total)
+    hi = jnp.cumsum(p)
+    lo = hi - p
+    edges = jnp.arange(bins + 1, dtype=c.dtype) / bins
+    e0 = edges[:-1].at[0].set(-1.0)[:, None]  # the first and last bins take every node
+    e1 = edges[1:].at[-1].set(2.0)[:, None]
+    part = jnp.clip(jnp.minimum(hi[None], e1) - jnp.maximum(lo[None], e0), 0.0, None)
+    mass = jnp.sum(part, axis=-1)
+    mean = safe_div(jnp.sum(part * c[None], axis=-1), mass)
+    var = safe_div(jnp.sum(part * (c[None] - mean[:, None]) ** 2, axis=-1), mass)
+    cos_o = jnp.cos(theta_o)
+    ok = mass > 0  # θ_o = 90°: no lobe; the bins sit at the view cosine
+    stats = jnp.stack([jnp.where(ok, mean - cos_o, 0.0), jnp.where(ok, jnp.sqrt(var), 0.0)])
+
+    def sub_lobe(pk):  # mean light direction and tr Σ_ω of a part of the lobe
+        mu, cov = light_moments(PatchQuadrature(c, pk, wi))
+        sin_beta = safe_div(-mu[0], jnp.hypot(mu[0], mu[2]))  # frame n = z, ω_r at −x
+        return jnp.stack([sin_beta, jnp.trace(cov)])
+
+    # the K bins' parts, then the whole lobe (the mean of the K parts)
+    lobe = jax.vmap(sub_lobe, out_axes=-1)(jnp.concatenate([part, p[None]]))  # (2, K + 1)
+    return stats, lobe
+
+
+@functools.cache
+def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
+    n_u, n_a = shape
+    u = np.linspace(0.0, 1.0, n_u)
+    sqa = np.linspace(0.0, 1.0, n_a)
+    theta = np.arccos(u**2)
+    t, a = np.meshgrid(theta, np.maximum(sqa**2, ALPHA_FLOOR), indexing="ij")
+    fn = jax.jit(jax.vmap(functools.partial(_bin_stats, bins=bins, quadrature=quadrature,
+                                            ndf=ndf)))
+    dt = jnp.result_type(float)  # float64 when enabled
+    rows = [jax.tree.map(lambda x: np.asarray(x, np.float64),
+                         fn(jnp.asarray(t[i], dt), jnp.asarray(a[i], dt))) for i in range(n_u)]
+    stats = np.stack([r[0] for r in rows])  # (n_u, n_a, 2, K)
+    lobe = np.stack([r[1] for r in rows])  # (n_u, n_a, 2, K + 1): sin β_k, tr Σ_k
+    # h_k = sin β_k / sin θ_o is even in θ_o, hence smooth in √cos θ_o (β_k is not): the
+    # θ_o = 0 row is its limit, extrapolated quadratically in θ_o² from the next three rows
+    # (at θ_o = 0 itself β_k = 0 exactly); the θ_o = 90° row (no lobe) reads along ω_r
+    lobe[1:-1, :, 0] /= np.sin(theta[1:-1])[:, None, None]
+    x = theta[-4:-1] ** 2
+    lag = [np.prod([-x[m] / (x[i] - x[m]) for m in range(3) if m != i]) for i in range(3)]
+    lobe[-1, :, 0] = sum(w * lobe[-4 + i, :, 0] for i, w in enumerate(lag))
+    lobe[0, :, 0] = 1.0
+    # √α_eff: invert tr Σ of the whole normal-view lobe (θ_o = 0, increasing in α)
+    sqa_f = np.linspace(0.0, 1.0, 257)
+    whole = jax.jit(jax.vmap(functools.partial(_bin_stats, bins=1, quadrature=quadrature,
+                                               ndf=ndf)))
+    tr0 = np.asarray(whole(jnp.zeros(257, dt), jnp.asarray(np.maximum(sqa_f**2, ALPHA_FLOOR),
+                                                           dt))[1][:, 1, -1], np.float64).copy()
+    tr0[0] = 0.0
+    tr0 = np.maximum.accumulate(tr0)
+    lobe[..., 1, :] = np.interp(lobe[..., 1, :], tr0, sqa_f)
+    # ring weight: how close the whole lobe's mean direction is to ω_o against the bins'
+    # angular distance ψ_k = arccos(2c̄_k² − 1) from ω_o (1: the bins are rings round ω_o)
+    sinb = np.clip(lobe[..., 0, -1] * np.sin(theta)[:, None], -1, 1)
+    dist = np.abs(np.arcsin(sinb) + theta[:, None])
+    cb = np.clip(stats[..., 0, :] + np.cos(theta)[:, None, None], 0, 1)
+    psi = np.mean(np.arccos(np.clip(2 * cb**2 - 1, -1, 1)), -1)
+    ring = np.clip(1 - dist / np.maximum(psi, 1e-12), 0, 1)
+    stats[:, 0] = 0.0  # √α = 0 is the mirror limit itself: every bin at cos θ_o, no spread
+    lobe[:, 0, 0], lobe[:, 0, 1] = 1.0, 0.0  # ... and every part is ω_r at level 0
+    ring[:, 0] = 0.0
+    return stats, lobe, ring
+
+
+def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
+              quadrature: tuple[int, int] = TABLE_QUADRATURE, ndf: str = "ggx",
+              dtype=jnp.float64) -> BinTable:
+    """The (θ_o, α) table of the bins (module docstring), built once per argument set.
+
+    Args:
+        bins: K ≥ 1 equal-probability bins of cos θ₁.
+        shape: (n_u ≥ 5, n_a ≥ 2) nodes in √cos θ_o and √α (√α = 0: the mirror limit,
+            offsets and spreads 0).
+        quadrature: (n_u, n_φ) of the half-vector quadrature of each node.
+        ndf: "ggx" or "beckmann".
+        dtype: float dtype of the table.
+    Cost: n_u · n_a quadratures of n_u·n_φ nodes (≈ 10 s on a 2-core CPU for the default,
+    once per process). Computed in float64 when enabled, else in float32.
+    """
+    from ..core import _validate as V
+
+    bins = V.check_int("bins", bins, 1)
+    if not isinstance(shape, (tuple, list)) or len(shape) != 2:
+        raise ValueError(f"shape must be (n_u, n_a), got {shape!r}")
+    shape = (V.check_int("shape[0]", shape[0], 5),  # the θ_o = 0 limit needs 3 interior rows
+             V.check_int("shape[1]", shape[1], 2))
+    quadrature = V.check_quadrature(quadrature)
+    V.check_choice("ndf", ndf, ("ggx", "beckmann"))
+    with jax.ensure_compile_time_eval():  # a host table, also when first asked for under jit
+        host = _bin_table_host(shape, bins, quadrature, ndf, bool(jax.config.jax_enable_x64))
+    return BinTable(*(jnp.asarray(x, dtype) for x in host))
+
+
+def _bilinear(tab, x, y):
+    """tab[(x, y) ∈ [0, 1]², ...] read bilinearly on its uniform grid."""
+    def cell(v, n):
+        t = jnp.clip(v, 0.0, 1.0) * (n - 1)
+        i = jnp.clip(jnp.floor(t), 0, n - 2)
+        return i.astype(jnp.int32), t - i
+
+    n_x, n_y = tab.shape[:2]
+    x, y = jnp.broadcast_arrays(jnp.asarray(x), jnp.asarray(y))
+    i0, fx = cell(x, n_x)
+    j0, fy = cell(y, n_y)
+    extra = (1,) * (tab.ndim - 2)
+    fx, fy = fx.reshape(fx.shape + extra), fy.reshape(fy.shape + extra)
+    a0 = tab[i0, j0] * (1 - fx) + tab[i0 + 1, j0] * fx
+    a1 = tab[i0, j0 + 1] * (1 - fx) + tab[i0 + 1, j0 + 1] * fx
+    return a0 * (1 - fy) + a1 * fy
+
+
+def lookup_bins(table: BinTable, cos_o, alpha):
+    """(c̄_k (..., K), s_k (..., K)) at cos θ_o ∈ [0, 1] and α ∈ (0, 1], bilinear in
+    (√cos θ_o, √α); c̄_k = cos θ_o + tabulated offset, clamped to [0, 1]."""
+    cos_o = jnp.asarray(cos_o)
+    st = _bilinear(table.stats, safe_sqrt(cos_o), safe_sqrt(alpha))
+    cos_o = jnp.broadcast_to(cos_o, st.shape[:-2])
+    return jnp.clip(cos_o[..., None] + st[..., 0, :], 0.0, 1.0), st[..., 1, :]
+
+
+def lookup_lobe(table: BinTable, normal, view, cos_o, alpha):
+    """Per bin and for the whole lobe, (direction (..., K + 1, 3), √α_eff (..., K + 1)) at
+    which to read the prefiltered radiance (`BinTable.lobe`): the mean light direction of the
+    bin's part of the lobe, d = cos β n + sin β ê in the plane of n and ω_r (ê ⟂ n towards
+    ω_r, sin β = h sin θ_o with the tabulated h, smooth at normal view), and the level of
+    equal total variance. World vectors; cos_o = ⟨n, ω_o⟩ > 0."""
+    st = _bilinear(table.lobe, safe_sqrt(cos_o), safe_sqrt(alpha))  # (..., 2, K + 1)
+    h = st[..., 0, :]
+    tangent = cos_o[..., None] * normal - view  # (sin θ_o) ê = ω_r − cos θ_o n
+    sin2_o = jnp.clip(1.0 - cos_o * cos_o, 0.0, 1.0)[..., None]
+    cos_b = safe_sqrt(jnp.clip(1.0 - h * h * sin2_o, 0.0, 1.0))
+    d = cos_b[..., None] * normal[..., None, :] + h[..., None] * tangent[..., None, :]
+    # the equirect lookup's (φ, θ) have no derivative at the poles (arctan2(0, 0)); there the
+    # direction is ±z (normal view of a z normal): pass no gradient through
+    pole = (d[..., 0] == 0) & (d[..., 1] == 0)
+    return jnp.where(pole[..., None], jax.lax.stop_gradient(d), d), st[..., 1, :]
+
+
+# ----------------------------------------------------------------------------- kernel
+def _bin_bands(film: Film, c, s, observer, terms, shat, lut, arithmetic) -> Array:
+    """K 29 in one bin (mean c̄ = `c`, spread s), shape broadcast(film, c, s) + (J,)."""
+    d = opd_of_cos(film, c)
+    slope = safe_div((2.0 * film.thickness * film.eta_outer) ** 2 * c, d)  # D'(c)
+    return filtered_bands(film, c, OPDMoments(d, jnp.abs(slope) * s), observer, terms=terms,
+                          shat=shat, lut=lut, arithmetic=arithmetic, interpolation="linear")
+
+
+def improved_bins(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
+                  terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
+                  arithmetic: str = "complex") -> Array:
+    """K 29 in each bin (module docstring): the bins' band reflectances, shape (..., K, J).
+
+    Args:
+        film: `Film`, fields broadcasting with the leading axes of `cos_bins`.
+        cos_bins: c̄_k (..., K) ∈ [0, 1], bin means of cos θ₁.
+        std_bins: s_k (..., K) ≥ 0, bin standard deviations of cos θ₁.
+        observer: band name (plain or cross-band, `uplift`).
+        terms: M Fourier orders.
+        shat: "lut" (bilinear read of `lut`), "exact" or "gaussian".
+        arithmetic: "complex" or "real" (κ₃ = 0 only) Fresnel arithmetic.
+    Each bin is its own per-point program (the bins are not broadcast against the film on a
+    bin axis, which XLA would materialise); the K results are stacked last.
+    """
+    cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
+    k = max(cos_bins.shape[-1], std_bins.shape[-1])
+    cos_bins = jnp.broadcast_to(cos_bins, cos_bins.shape[:-1] + (k,))
+    std_bins = jnp.broadcast_to(std_bins, std_bins.shape[:-1] + (k,))
+    film = Film(*(jnp.asarray(x) for x in film))
+    return jnp.stack([_bin_bands(film, cos_bins[..., b], std_bins[..., b], observer, terms,
+                                 shat, lut, arithmetic) for b in range(k)], axis=-2)
+
+
+def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
+                   terms: int = 2, shat: str = "lut", lut: ShatLUT | None = None,
+                   arithmetic: str = "complex") -> Array:
+    """The mean of `improved_bins` over the K equal-probability bins: R̄_j (..., J), the
+    model under uniform light. Arguments as `improved_bins`; the bins are summed as they are
+    computed (no bin axis)."""
+    cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
+    k = max(cos_bins.shape[-1], std_bins.shape[-1])
+    cos_bins = jnp.broadcast_to(cos_bins, cos_bins.shape[:-1] + (k,))
+    std_bins = jnp.broadcast_to(std_bins, std_bins.shape[:-1] + (k,))
+    film = Film(*(jnp.asarray(x) for x in film))
+    total = None
+    for b in range(k):
+        r = _bin_bands(film, cos_bins[..., b], std_bins[..., b], observer, terms, shat, lut,
+                       arithmetic)
+        total = r if total is None else total + r
+    return total * (1.0 / k)
+
+
+def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,
+                    observer=DEFAULT_OBSERVER, terms: int = 2, shat: str = "lut",
+                    lut: ShatLUT | None = None, arithmetic: str = "complex") -> Array:
+    """Improved band reflectance under uniform light, (..., J): `lookup_bins` then
+    `improved_bands`. Multiply by A(θ_o, α) for the patch radiance.
+
+    Args:
+        film: `Film` (fields broadcast with cos_o and alpha).
+        cos_o: cos θ_o ∈ [0, 1].
+        alpha: GGX roughness α ∈ (0, 1].
+        table: `bin_table(...)` (its K is the number of bins).
+        observer, terms, shat, lut, arithmetic: as `improved_bands`.
+    """
+    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in film), jnp.shape(cos_o),
+                                 jnp.shape(alpha))
+    cb, sb = lookup_bins(table, jnp.broadcast_to(cos_o, shape), jnp.broadcast_to(alpha, shape))
+    return improved_bands(film, cb, sb, observer, terms=terms, shat=shat, lut=lut,
+                          arithmetic=arithmetic)

@@ -1,0 +1,68 @@
+"""`ModelOptions`: the static knobs that travel together through every forward model.
+
+One small, hashable record (a `NamedTuple` of Python strings and ints, never arrays), so that
+it is a `jax.jit` static argument as it stands and one object carries the same choices through
+`patch_radiance`, `envmap_radiance`, the kernels and the fits. The vocabulary is the
+library's: each name means one thing everywhere.
+
+| field | values | meaning |
+|---|---|---|
+| ``terms`` | int ≥ 0 | M, Fourier orders of the real-time methods (BB17 K 4, K 29) |
+| ``shat`` | "exact" · "lut" · "gaussian" | source of the band spectrum Ŝ_j(μ, σ²) (SPEC §5) |
+| ``ndf`` | "ggx" · "beckmann" | microfacet normal distribution (the IBL methods: GGX) |
+| ``quadrature`` | (n_u ≥ 1, n_φ ≥ 2) | orders of the half-vector patch quadrature |
+| ``arithmetic`` | "auto" · "real" · "complex" | Fresnel arithmetic (a scene specialisation) |
+| ``layer`` | "auto" · "film" · "bare" | "bare": no film (d = 0), the outer|base Fresnel only |
+
+``arithmetic="auto"`` picks the real (dielectric) path when the concrete film allows it
+(κ₃ = 0, η₂, η₃ ≥ η₁) and the complex one otherwise or under `jit`, where the caller forces
+``"real"`` to specialise (see `airy.choose_arithmetic`); ``layer="auto"`` likewise picks the
+bare interface when every thickness is concretely 0 (`reflectance.choose_layer`). The
+specialisations change no result beyond rounding, except that a bare film gets the exact
+R₁₃ Ŝ_j(0) where the Fourier methods would truncate at M terms. The observer is not a field: it is
+the keyword ``observer=`` of every public function (SPEC §8).
+
+Example:
+    >>> from thinfilm_jax import ModelOptions
+    >>> ModelOptions(terms=3, shat="lut").terms
+    3
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from ..core import _validate as V
+from .filtered import SHAT_SOURCES
+from ..brdf.microfacet import DEFAULT_QUADRATURE, NDFS
+from ..spectral.reflectance import LAYERS
+
+ARITHMETIC_CHOICES = ("auto", "real", "complex")
+
+
+class ModelOptions(NamedTuple):
+    """Static model knobs (hashable; see the module docstring for the vocabulary)."""
+
+    terms: int = 2
+    shat: str = "exact"
+    ndf: str = "ggx"
+    quadrature: tuple[int, int] = DEFAULT_QUADRATURE
+    arithmetic: str = "auto"
+    layer: str = "auto"
+
+    def checked(self) -> ModelOptions:
+        """The same options validated (ValueError naming the field) and normalised."""
+        V.check_choice("shat", self.shat, SHAT_SOURCES)
+        V.check_choice("ndf", self.ndf, NDFS)
+        V.check_choice("arithmetic", self.arithmetic, ARITHMETIC_CHOICES)
+        V.check_choice("layer", self.layer, LAYERS)
+        return self._replace(terms=V.check_int("terms", self.terms, 0),
+                             quadrature=V.check_quadrature(self.quadrature))
+
+
+def check_options(options) -> ModelOptions:
+    """`options` as a validated `ModelOptions` (TypeError for anything else)."""
+    if not isinstance(options, ModelOptions):
+        raise TypeError(f"options must be a thinfilm_jax.ModelOptions, got "
+                        f"{type(options).__name__}")
+    return options.checked()

@@ -1,0 +1,302 @@
+r"""Reflected radiance of a film under an environment map, every method of SPEC §9.
+
+$$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega_i\rangle
+   R_{jk}(\langle h,\omega_i\rangle)\, c_k(\omega_i)\, d\omega_i \qquad (K\ 7, 11;\ SPEC\ §9) $$
+
+| method      | how                                                                          |
+|-------------|------------------------------------------------------------------------------|
+| `reference` | texel-space quadrature of the piecewise-constant map (`ibl_reference`): one node per texel with the midpoint rule's error term, s×s Gauss–Legendre nodes in (cos θ, φ) in the texels where the lobe is narrow or cut by the horizon, R_jk(c) exact spectral on a fine c-grid, interpolated |
+| `mc`        | GGX visible-normal sampling (Heitz 2018), weight G₂/G₁, exact spectral R_jk per sample, nearest-texel radiance; fixed key and count |
+| `ideal`     | A(θ_o, α) · Σ_k R_jk(cos θ_o) P_k(ω_r, α): BB17 under the split sum (`kernels.ideal_kernel`, Ŝ from the LUT at σ = 0 by default) |
+| `filtered`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_r, α), R̄ = K 29 with the prefiltered moments μ_ω, Σ_ω (`kernels.filtered_kernel`) |
+| `improved`  | A(θ_o, α) · (1/K) Σ_b Σ_k R_jk(bin b) P_k(ω_μ,b, α_eff,b): K 29 per equal-probability bin b of cos θ₁, each bin times the prefiltered radiance of its own part of the lobe (tabulated mean direction and equal-variance level; near normal view their mean moved to the whole lobe's read) (`ibl.improved_envmap`, docs/improved.md) |
+
+R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the per-channel
+("diagonal") approximation L_j ≈ R_j P_j is the option `cross_band=False`.
+
+Reference accuracy and cost: `thinfilm_jax.shading.ibl_reference` (its docstring); the exhaustive
+rule (every texel with s × s nodes) stays reachable there as `exhaustive=True`, and
+tests/test_ibl_reference.py compares the two. The convergence (the SPEC's 1e-3 of the band
+maximum) is tested in tests/test_ibl.py.
+
+Example (a white map is the uniform light of `patch_radiance`, since Σ_k R_jk = R_j: at normal
+view the tabulated A and the level √α = 0.5 are exact nodes, measured agreement 3e-9; a point
+that faces away from the eye gives 0):
+    >>> import numpy as np
+    >>> from thinfilm_jax import Film, patch_radiance, prefilter_envmap
+    >>> from thinfilm_jax.shading.ibl import envmap_radiance
+    >>> pref = prefilter_envmap(np.ones((8, 16, 3)), levels=3, resolution=(8, 16),
+    ...                         albedo_shape=(8, 5))
+    >>> film, n = Film(600.0, 1.3, 2.0, 0.5), np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    >>> L = envmap_radiance(film, 0.25, n, np.array([0.0, 0.0, 1.0]), pref, method="ideal")
+    >>> L.shape
+    (2, 3)
+    >>> bool(np.allclose(L[0], patch_radiance(film, 0.0, 0.25, method="ideal"), atol=1e-6))
+    True
+    >>> L[1].tolist()
+    [0.0, 0.0, 0.0]
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from ..core import _validate as V
+from ..optics.airy import choose_arithmetic
+from .envmap import EnvMap, load_envmap
+from ..core.film import Film
+from .ibl_reference import (_interp, _lobe_cos_weight, _r_table,  # noqa: F401 (re-exported)
+                            auto_subdivisions, exact_radiance, texel_nodes)
+from ..optics.fresnel import safe_sqrt
+from ..realtime.improved import (BinTable, _bilinear, bin_table, improved_bins, lookup_bins,
+                       lookup_lobe)
+from ..realtime.kernels import filtered_kernel, ideal_kernel
+from ..spectral.lut import build_shat_lut
+from ..realtime.options import ModelOptions, check_options
+from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered, lookup_radiance,
+                        moments_to_mean_cov, prefilter_envmap)
+from .sources import source_radiance
+from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
+from ..spectral.uplift import cross_band_name
+
+METHODS = ("reference", "mc", "ideal", "filtered", "improved")
+REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
+HIGHEST = jax.lax.Precision.HIGHEST
+DEFAULT_SOURCES = 4  # suns split from a map that `improved` prefilters itself
+
+
+# ----------------------------------------------------------------------------- public
+def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "reference",
+                    observer: str = DEFAULT_OBSERVER, options: ModelOptions = REALTIME_OPTIONS,
+                    cross_band: bool = True, subdivisions: int | None = None,
+                    n_cos: int = 1024, n_samples: int = 4096, key=None,
+                    batch_size: int | None = None, max_height: int | None = 256,
+                    sources: int | None = None) -> Array:
+    """Band radiances L_j (..., J) of a film under an environment map (SPEC §9).
+
+    Args:
+        film: `Film`, fields broadcasting with the shading points.
+        alpha: GGX roughness α ∈ (0, 1].
+        normal, view: unit world vectors (..., 3) (z-up); view points toward the eye.
+        envmap: `EnvMap` (any method; real-time methods prefilter it on the host each call)
+            or `PrefilteredEnvMap` (real-time methods only; build it once).
+        method: "reference" | "mc" | "ideal" | "filtered" | "improved".
+        observer: colour bands.
+        options: `ModelOptions` (default `REALTIME_OPTIONS`: shat="lut", the map's table):
+            terms = Fourier orders M and shat = Ŝ source of the real-time methods,
+            arithmetic ("auto" specialises a concrete dielectric film); ndf must be "ggx"
+            (the prefiltered maps are GGX); quadrature does not apply.
+        cross_band: True: R_jk under RGB light (SPEC §9); False: the diagonal approximation.
+        subdivisions: s Gauss nodes per axis inside each refined texel (reference); None = auto.
+        n_cos: nodes of the reference's R_jk(cos θ₁) table.
+        n_samples, key: Monte Carlo sample count and PRNG key (default key 0).
+        batch_size: shading points evaluated together (default: 65536 for the real-time
+            methods, about 2¹⁹ quadrature nodes' worth for the exact ones).
+        max_height: the reference resamples a map taller than this (solid-angle-exact
+            `envmap.downsample` by a power of two while the texel stays ≤ α_min/8 and
+            the map ≥ 128 rows) and warns; None integrates every texel
+            (`ibl_reference.resample_factor`).
+        sources: when a real-time method prefilters an `EnvMap` here: split up to this
+            many compact bright sources (suns) and shade them apart (`sources`,
+            docs/improved.md). None: 4 for "improved", 0 for "ideal" and "filtered" (the
+            published method). A `PrefilteredEnvMap` carries its own split (it was made
+            by `prefilter_envmap(sources=...)`) and every real-time method shades it.
+    Shading points with ⟨n, ω_o⟩ ≤ 0 give 0.
+    """
+    V.check_film(film)
+    V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    V.check_choice("method", method, METHODS)
+    V.check_choice("observer", observer, OBSERVERS)
+    options = check_options(options)
+    if options.ndf != "ggx":
+        raise ValueError(f"envmap_radiance supports ndf='ggx' only (the prefiltered maps and "
+                         f"the reference's lobe are GGX), got ndf={options.ndf!r}")
+    if options.layer == "bare":
+        raise ValueError("envmap_radiance has no bare-interface path (ModelOptions.layer): "
+                         "use layer='auto' or 'film'")
+    terms, shat = options.terms, options.shat
+    for name, v in (("normal", normal), ("view", view)):
+        if np.shape(v)[-1:] != (3,):
+            raise ValueError(f"{name} must have shape (..., 3), got {np.shape(v)}")
+        if V.is_concrete(v):
+            V.check_finite(name, v)
+            nrm = np.linalg.norm(np.asarray(v, float), axis=-1)
+            if np.any(np.abs(nrm - 1) > 1e-3):
+                raise ValueError(f"{name} must be unit vectors; got a norm of "
+                                 f"{nrm.flat[np.argmax(np.abs(nrm - 1))]:.6g}")
+    shape = V.check_broadcast([("film", np.zeros(film.shape)), ("alpha", alpha),
+                               ("normal", np.zeros(np.shape(normal)[:-1])),
+                               ("view", np.zeros(np.shape(view)[:-1]))])
+    arithmetic = choose_arithmetic(film, options.arithmetic)
+    realtime = method in ("ideal", "filtered", "improved")
+    if isinstance(envmap, PrefilteredEnvMap):
+        if not realtime:
+            raise ValueError(f"method={method!r} integrates the map itself: pass an EnvMap, "
+                             "not a PrefilteredEnvMap")
+        pref = envmap
+    elif realtime:
+        if sources is None:
+            sources = DEFAULT_SOURCES if method == "improved" else 0
+        pref = prefilter_envmap(envmap, observer=observer, sources=sources)
+    else:
+        env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
+    dtype = jnp.result_type(alpha, normal, view, *film, float)
+    args = [jnp.broadcast_to(jnp.asarray(x, dtype), shape) for x in (*film, alpha)]
+    nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
+    if realtime:
+        if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
+            raise ValueError("the PrefilteredEnvMap was built for another observer")
+        cfg = (method, observer, terms, shat, bool(cross_band), arithmetic)
+        if method == "improved":  # its (θ_o, α) tables travel with the map
+            pref = (pref, bin_table(dtype=dtype))
+        return _realtime_jit(Film(*args[:5]), args[5], *nv, pref, cfg,
+                             int(batch_size or 65536))
+    return exact_radiance(Film(*args[:5]), args[5], *nv, env, method=method, observer=observer,
+                          cross_band=bool(cross_band), arithmetic=arithmetic,
+                          one_film=film.shape == (), subdivisions=subdivisions, n_cos=n_cos,
+                          n_samples=n_samples, key=key, batch_size=batch_size,
+                          max_height=max_height)
+
+
+
+# ----------------------------------------------------------------------------- real time
+@functools.partial(jax.jit, static_argnums=(5, 6))
+def _realtime_jit(film, alpha, normal, view, pref, cfg, chunk):
+    """Flatten the shading points and shade them `chunk` at a time (bounded memory)."""
+    shape = alpha.shape
+    flat = [x.reshape(-1) for x in (*film, alpha)] + [v.reshape(-1, 3) for v in (normal, view)]
+    n = flat[0].shape[0]
+    if n <= chunk:
+        out = _realtime_points(Film(*flat[:5]), *flat[5:], pref, cfg)
+    else:
+        m = -(-n // chunk)
+        padded = [jnp.pad(x, [(0, m * chunk - n)] + [(0, 0)] * (x.ndim - 1), mode="edge")
+                  for x in flat]
+        out = jax.lax.map(lambda xs: _realtime_points(Film(*xs[:5]), *xs[5:], pref, cfg),
+                          [x.reshape((m, chunk) + x.shape[1:]) for x in padded])
+        out = out.reshape(m * chunk, -1)[:n]
+    return out.reshape(*shape, out.shape[-1])
+
+
+def _realtime_points(film, alpha, normal, view, pref, cfg):
+    """The map's method plus the sources split from it (if any), at flat shading points."""
+    method, observer, terms, shat, cross, arithmetic = cfg
+    out = _map_points(film, alpha, normal, view, pref, cfg)
+    pref = pref[0] if method == "improved" else pref
+    if pref.has_sources:
+        lut = pref.lut if cross else (build_shat_lut(observer, dtype=alpha.dtype)
+                                      if shat == "lut" else None)
+        out = out + source_radiance(film, alpha, normal, view, pref.sources,
+                                    observer=observer, terms=terms, shat=shat, lut=lut,
+                                    arithmetic=arithmetic, cross_band=cross)
+    return out
+
+
+def _map_points(film, alpha, normal, view, pref, cfg):
+    method, observer, terms, shat, cross, arithmetic = cfg
+    if method == "improved":
+        pref, table = pref
+        lut = pref.lut if cross else (build_shat_lut(observer, dtype=alpha.dtype)
+                                      if shat == "lut" else None)
+        return improved_envmap(film, alpha, normal, view, pref, table, observer=observer,
+                               terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
+                               cross_band=cross)
+    cos_o = jnp.sum(normal * view, axis=-1)
+    up = cos_o > 0
+    co = jnp.where(up, cos_o, 1.0)
+    refl = 2 * co[..., None] * normal - view
+    sqa = jnp.sqrt(alpha)
+    rad, mom = lookup_prefiltered(pref, refl, sqa)
+    a = lookup_albedo(pref, co, sqa)
+    obs = cross_band_name(observer) if cross else observer
+    lut = pref.lut if cross else None
+    if shat == "lut" and not cross:  # the diagonal path reads the plain bands' table
+        lut = build_shat_lut(observer, dtype=alpha.dtype)
+    per_light = cross and shat == "lut" and not pref.per_channel
+    if per_light:  # Σ_k R_jk P_k read per light channel (`filtered.filtered_bands`)
+        kw = dict(observer=obs, terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
+                  light=rad)
+        if method == "ideal":
+            out = ideal_kernel(film, co, **kw)
+        else:
+            out = filtered_kernel(film, view, *moments_to_mean_cov(mom), **kw)
+        return jnp.where(up[..., None], a[..., None] * out, 0.0)
+    if method == "ideal":
+        r = ideal_kernel(film, co, observer=obs, terms=terms, shat=shat, lut=lut,
+                         arithmetic=arithmetic)
+    else:
+        if pref.per_channel:  # moments of channel k drive R_jk (..., 3[k], 9)
+            mean, cov = moments_to_mean_cov(mom)
+            f3 = Film(*(jnp.asarray(x)[..., None] for x in film))
+            r = filtered_kernel(f3, view[..., None, :], mean, cov, observer=obs, terms=terms,
+                                shat=shat, lut=lut, arithmetic=arithmetic)
+        else:
+            mean, cov = moments_to_mean_cov(mom)
+            r = filtered_kernel(film, view, mean, cov, observer=obs, terms=terms, shat=shat,
+                                lut=lut, arithmetic=arithmetic)
+    if cross:
+        r = r.reshape(r.shape[:-1] + (3, 3))  # (..., [k,] j, k)
+        if r.ndim > rad.ndim + 1:  # per-channel moments: keep k of the moments = k of R
+            r = jnp.diagonal(r, axis1=-3, axis2=-1)  # (..., j, k)
+        out = jnp.sum(r * rad[..., None, :], axis=-1)
+    else:
+        if r.ndim > rad.ndim:
+            r = jnp.diagonal(r, axis1=-2, axis2=-1)
+        out = r * rad
+    return jnp.where(up[..., None], a[..., None] * out, 0.0)
+
+
+def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
+                    observer=DEFAULT_OBSERVER, terms: int = 2, shat: str = "lut",
+                    lut: ShatLUT | None = None, arithmetic: str = "complex",
+                    cross_band: bool = True) -> Array:
+    r"""`envmap_radiance(method="improved")` at shading points: L_j (..., J), 0 where ⟨n,ω_o⟩ ≤ 0.
+
+    $$ L_j = \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K}\sum_c R_{jc}(\bar c_k, s_k)\,
+       P_c(\omega_{\mu,k}, \alpha_{\mathrm{eff},k}) $$
+
+    Each bin's film reflectance (`improved_bins`) multiplies the prefiltered radiance of its
+    own part of the lobe, read at that part's mean light direction ω_μ,k and equal-variance
+    level α_eff,k (`lookup_lobe`): exact for the light–film coupling between bins
+    (E[R L] = (1/K) Σ_k E[R L | bin k]), the covariance of R and L inside a bin neglected.
+    Near normal view (ring weight w of `BinTable.ring`) the reads' mean is moved to the
+    whole lobe's read. A constant environment gives the uniform-light model exactly. The
+    prefiltered moments are not read: K + 1 radiance reads of 3 channels per point, against
+    `filtered`'s one read of 3 + 9.
+
+    Args:
+        film: `Film` broadcasting with the shading points.
+        alpha: GGX α (...).
+        normal, view: unit world vectors (..., 3).
+        pref: `prefilter.PrefilteredEnvMap` (its radiance levels and albedo table).
+        table: `bin_table(...)`.
+        observer: plain band name (the cross bands are used when `cross_band`).
+        terms, shat, lut, arithmetic: as `improved_bins`; `lut` must hold the bands used
+            (the map's cross-band table when `cross_band`).
+        cross_band: R_jc under RGB light (SPEC §9) or the diagonal R_j P_j.
+    """
+    cos_o = jnp.sum(normal * view, axis=-1)
+    up = cos_o > 0
+    co = jnp.where(up, cos_o, 1.0)
+    a = lookup_albedo(pref, co, safe_sqrt(alpha))
+    dirn, sqa_eff = lookup_lobe(table, normal, view, co, alpha)  # (..., K + 1, 3), (..., K + 1)
+    rad = lookup_radiance(pref, dirn, sqa_eff)  # (..., K + 1, 3)
+    # the bins' reads carry the light–film coupling; where the bins are rings round ω_o
+    # (near normal view) their mean is moved to the whole lobe's read (module docstring)
+    w = _bilinear(table.ring, safe_sqrt(co), safe_sqrt(alpha))[..., None, None]
+    rad = rad[..., :-1, :] + w * (rad[..., -1:, :] - jnp.mean(rad[..., :-1, :], axis=-2,
+                                                             keepdims=True))
+    cb, sb = lookup_bins(table, co, alpha)
+    obs = cross_band_name(observer) if cross_band else observer
+    r = improved_bins(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,
+                      arithmetic=arithmetic)  # (..., K, J[·3])
+    if cross_band:
+        out = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * rad[..., None, :], axis=-1)
+    else:
+        out = r * rad
+    return jnp.where(up[..., None], a[..., None] * jnp.mean(out, axis=-2), 0.0)

@@ -33,6 +33,8 @@ from .realtime import kernels as kernels
 from .core._validate import checked as checked
 from .core.compilation_cache import enable_compilation_cache as enable_compilation_cache
 from .optics.airy import airy_reflectance as airy_reflectance
+from .optics.fresnel import fresnel_schlick as fresnel_schlick
+from .optics.fresnel import normal_reflectance as normal_reflectance
 from .shading.envmap import SHIPPED as SHIPPED_ENVMAPS
 from .shading.envmap import EnvMap as EnvMap
 from .shading.envmap import load_envmap as load_envmap

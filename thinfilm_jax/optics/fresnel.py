@@ -164,3 +164,31 @@ def film_interfaces(film: Film, cos_theta, *, arithmetic: str = "complex") -> In
     r12 = interface_amplitudes(q1, q2, eps1, eps2)
     r23 = interface_amplitudes(q2, q3, eps2, eps3)
     return Interfaces(r12, r23, q2)
+
+
+def normal_reflectance(eta, kappa=0.0, eta_outer=1.0) -> Array:
+    r"""Reflectance at normal incidence of a base η + iκ under a medium η₁ (both polarisations):
+    F₀ = ((η − η₁)² + κ²) / ((η + η₁)² + κ²) (Born & Wolf §13.2; κ = 0: a dielectric)."""
+    eta, kappa, eta_outer = jnp.asarray(eta), jnp.asarray(kappa), jnp.asarray(eta_outer)
+    k2 = kappa * kappa
+    return ((eta - eta_outer) ** 2 + k2) / ((eta + eta_outer) ** 2 + k2)
+
+
+def fresnel_schlick(f0, cos_theta) -> Array:
+    r"""Schlick's approximation of the unpolarised Fresnel reflectance (Schlick 1994, Eq. 24;
+    SPEC §10): $F = F_0 + (1 - F_0)(1 - \cos\theta)^5$, broadcasting `f0` (e.g. the bands
+    (..., J) of a tint, or `normal_reflectance`) against `cos_theta` ∈ [0, 1] (clipped there,
+    so a grazing or back-facing cosine gives 1, not a value above it).
+
+    Example (exact at normal incidence and at grazing; glass at 60°: 0.070 against the exact
+    unpolarised 0.089):
+        >>> from thinfilm_jax.optics.fresnel import fresnel_schlick, normal_reflectance
+        >>> f0 = normal_reflectance(1.5)
+        >>> [round(float(fresnel_schlick(f0, c)), 4) for c in (1.0, 0.5, 0.0)]
+        [0.04, 0.07, 1.0]
+    """
+    f0 = jnp.asarray(f0)
+    c = jnp.clip(jnp.asarray(cos_theta), 0.0, 1.0)
+    m = 1.0 - c
+    m2 = m * m
+    return f0 + (1.0 - f0) * (m2 * m2 * m)

@@ -16,9 +16,12 @@ unit-area bands, so a flat reflectance R gives R in every band). The pieces come
 Specular NDFs (`ndf`): "ggx", "beckmann", "ggx_aniso", "blinn_phong", "ashikhmin_shirley",
 "none"; maskings (`masking.MASKINGS`): "smith_correlated", "smith_separable" (Smith Λ of GGX,
 Beckmann, anisotropic GGX, and for Blinn–Phong the Beckmann Λ at Walter's α = √(2/(s + 2)), an
-approximation), "v_cavity", "ashikhmin_shirley", "implicit" (any NDF). Ashikhmin & Shirley's 2000
-specular BRDF is `ashikhmin_shirley_lobe` with its default masking "ashikhmin_shirley":
-D_AS/(4⟨h,ω_o⟩ max(c_i, c_o)) F. Diffuse kinds: "none", "lambert", "oren_nayar",
+approximation), "v_cavity", "ashikhmin_shirley", "implicit" (any NDF). The "ashikhmin_shirley" NDF
+of a `Material` is the paper's p(h) (`ndf.ashikhmin_shirley_pdf`, normalised on dω_h, a factor
+κ = √((n_u+1)(n_v+1)/((n_u+2)(n_v+2))) below the projected-area NDF `ndf.ashikhmin_shirley`), so
+that `ashikhmin_shirley_lobe` with its default masking "ashikhmin_shirley" is Ashikhmin &
+Shirley's 2000 specular BRDF as published (their Eq. 4):
+√((n_u+1)(n_v+1))/(8π) ⟨n,h⟩^{e(φ_h)} F/(⟨h,ω_o⟩ max(c_i, c_o)). Diffuse kinds: "none", "lambert", "oren_nayar",
 "ashikhmin_shirley" (coupled to the specular layer through R_s = F_j(1), its Eq. 5).
 
 The parameters are pytree leaves (`jax.grad` with respect to a `Material` gives a `Material` of
@@ -309,7 +312,7 @@ def _specular_dv(s: Specular, ci, co, nh, oh, frame):
     else:
         h_t, h_b = frame["h"]
         d = (_ndf.ggx_aniso(h_t, h_b, nh, ax, ay) if s.ndf == "ggx_aniso"
-             else _ndf.ashikhmin_shirley(h_t, h_b, nh, ax, ay))
+             else _ndf.ashikhmin_shirley_pdf(h_t, h_b, nh, ax, ay))
     m = s.masking
     if m.startswith("smith"):
         if s.ndf == "ggx_aniso":

@@ -13,9 +13,15 @@ finite on the whole closed upper hemisphere (h = n and grazing h included; doubl
   α_x = α_y = α gives GGX.
 * normalised Blinn–Phong (Blinn 1977; normalisation as in Walter et al. 2007, Eq. 30):
   D = (s + 2)/(2π) cosˢθ_h, s ≥ 0 (s = 0: the uniform distribution of cos-weighted h).
-* Ashikhmin–Shirley 2000 anisotropic Phong (their Eq. 4 with p(h) = D(h)⟨n,h⟩ … written as a
-  D normalised like the others):  D = √((n_u + 1)(n_v + 1))/(2π) · cos θ_h^{n_u cos²φ_h + n_v sin²φ_h},
-  cos²φ_h = h_t²/(h_t² + h_b²); n_u = n_v = s is Blinn–Phong with the same s.
+* Ashikhmin–Shirley 2000 anisotropic Phong, e(φ_h) = n_u cos²φ_h + n_v sin²φ_h,
+  cos²φ_h = h_t²/(h_t² + h_b²), n_u, n_v ≥ 0. Their half-vector density (their Eq. 6 and
+  Eq. 4's constant) p(h) = √((n_u + 1)(n_v + 1))/(2π) cos θ_h^{e(φ_h)} is normalised on dω_h,
+  ∫ p dω_h = 1 (since ∫₀^{2π} dφ/(A cos²φ + B sin²φ) = 2π/√(AB)); `ashikhmin_shirley_pdf`.
+  By the same identity the NDF normalised like the others, ∫ D ⟨n,h⟩ dω_h = 1, is
+  D = √((n_u + 2)(n_v + 2))/(2π) cos θ_h^{e(φ_h)} (`ashikhmin_shirley`): p(h) = κ D with
+  κ = √((n_u + 1)(n_v + 1)/((n_u + 2)(n_v + 2))) < 1. At n_u = n_v = s, D is Blinn–Phong's and
+  p(h) = (s + 1)/(2π) cosˢθ_h. Their specular BRDF (Eq. 4) is p(h) F/(4⟨h,ω⟩ max(c_i, c_o)):
+  `material.ashikhmin_shirley_lobe` with its default masking.
 
 The "(s + 8)/(8π) cosˢθ_h" specular lobe of real-time rendering (Akenine-Möller, Haines &
 Hoffman, *Real-Time Rendering* 3rd ed., §7.6) is not an NDF but a whole specular BRDF without
@@ -50,7 +56,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["beckmann", "ggx", "ggx_aniso", "blinn_phong", "blinn_phong_specular",
-           "ashikhmin_shirley", "walter_alpha"]
+           "ashikhmin_shirley", "ashikhmin_shirley_pdf", "walter_alpha"]
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -75,11 +81,15 @@ def exp_cut(dtype):
 def log_cos_over_sin2(u):
     """g(u) = log(cos θ)/sin²θ = log1p(−u)/(2u) for u = sin²θ ∈ [0, 1); −½ at u = 0 (smooth).
 
+    Above u = 1e-3 as log(w)/(2(1 − w)), w = 1 − u rounded (Goldberg 1991, Theorem 4: exact
+    1 − w makes it accurate to a few ulps).
+
     Series −½ Σ_k u^k/(k + 1) below u = 1e-3 (truncation after u⁴: relative error ≤ u⁵/6 ≤ 2e-16);
     −inf-free: u = 1 (cos θ = 0) gives a finite large negative value through the guard."""
     small = u < 1e-3
-    us = jnp.where(small, 1.0, jnp.minimum(u, 1 - float(np.finfo(u.dtype).eps)))
-    exact = jnp.log1p(-us) / (2 * us)
+    us = jnp.where(small, 0.5, jnp.minimum(u, 1 - float(np.finfo(u.dtype).eps)))
+    w = 1 - us  # log1p(−u)/(2u) = log(w)/(2(1 − w)) with 1 − w exact (Goldberg's log1p): XLA:CPU's
+    exact = jnp.log(w) / (2 * (1 - w))  # own float64 log1p is off by up to 3e-14 (measured)
     z = jnp.where(small, u, 0)
     series = -0.5 * (1 + z * (1 / 2 + z * (1 / 3 + z * (1 / 4 + z / 5))))
     return jnp.where(small, series, exact)
@@ -149,13 +159,24 @@ def ggx_aniso(h_t, h_b, h_n, alpha_x, alpha_y):
     return jnp.where(h_n > 0, 1 / (np.pi * ax * ay * d * d), 0)
 
 
-def ashikhmin_shirley(h_t, h_b, h_n, n_u, n_v):
-    """Ashikhmin–Shirley 2000 D = √((n_u+1)(n_v+1))/(2π) cos θ_h^{n_u cos²φ_h + n_v sin²φ_h}.
-
-    The exponent times log cos θ_h is (n_u h_t² + n_v h_b²) g(h_t² + h_b²) (`log_cos_over_sin2`),
-    smooth at h = n. n_u, n_v ≥ 0 along t and b. 0 for h_n ≤ 0."""
+def _as_power(h_t, h_b, h_n, n_u, n_v, shift):
     h_t, h_b, h_n, nu, nv = _float(h_t, h_b, h_n, n_u, n_v)
     u = clamp01(h_t * h_t + h_b * h_b)
     expo = (nu * h_t * h_t + nv * h_b * h_b) * log_cos_over_sin2(u)
-    norm = jnp.sqrt((nu + 1) * (nv + 1)) / (2 * np.pi)
+    norm = jnp.sqrt((nu + shift) * (nv + shift)) / (2 * np.pi)
     return jnp.where(h_n > 0, norm * jnp.exp(jnp.where(h_n > 0, expo, 0)), 0)
+
+
+def ashikhmin_shirley(h_t, h_b, h_n, n_u, n_v):
+    """Ashikhmin–Shirley NDF D = √((n_u+2)(n_v+2))/(2π) cos θ_h^{n_u cos²φ_h + n_v sin²φ_h},
+    normalised ∫ D ⟨n,h⟩ dω_h = 1 (module docstring).
+
+    The exponent times log cos θ_h is (n_u h_t² + n_v h_b²) g(h_t² + h_b²) (`log_cos_over_sin2`),
+    smooth at h = n. n_u, n_v ≥ 0 along t and b. 0 for h_n ≤ 0."""
+    return _as_power(h_t, h_b, h_n, n_u, n_v, 2)
+
+
+def ashikhmin_shirley_pdf(h_t, h_b, h_n, n_u, n_v):
+    """Ashikhmin & Shirley's p(h) = √((n_u+1)(n_v+1))/(2π) cos θ_h^{n_u cos²φ_h + n_v sin²φ_h}
+    (their Eq. 4 and 6), normalised ∫ p dω_h = 1; = κ `ashikhmin_shirley` (module docstring)."""
+    return _as_power(h_t, h_b, h_n, n_u, n_v, 1)

@@ -326,7 +326,8 @@ def _terms():
          [(0.0, 0.0, 0.0, 0.3), (half, 0.5, 0.0, 0.3), (0.5, 0.5, 0.0, 0.0)],
          [(0.4, 0.9, 0.5, 0.3), (1.0, 0.3, 2.0, 0.6)]),
         ("ashikhmin_shirley_diffuse", lambda ti, to, rs: diffuse.ashikhmin_shirley(
-            0.8, rs, w(ti, 0.0), w(to, 1.0), n.astype(ti.dtype)), [(0.0, 0.0, 0.04), (half, 0.3, 0.04)],
+            0.8, rs, w(ti, 0.0), w(to, 1.0), n.astype(ti.dtype)),
+         [(0.0, 0.0, 0.04), (half, 0.3, 0.04)],
          [(0.4, 0.9, 0.5)]),
     ]
 

@@ -56,7 +56,8 @@ def ref_d(ndf, th, ph, x, y):
     if ndf == "blinn_phong":
         return (x + 2) / (2 * np.pi) * c**x
     # Ashikhmin & Shirley 2000, Eq. 4: their p(h)
-    return np.sqrt((x + 1) * (y + 1)) / (2 * np.pi) * c ** (x * np.cos(ph) ** 2 + y * np.sin(ph) ** 2)
+    e = x * np.cos(ph) ** 2 + y * np.sin(ph) ** 2
+    return np.sqrt((x + 1) * (y + 1)) / (2 * np.pi) * c**e
 
 
 def ref_lambda(ndf, th, ph, x, y):
@@ -241,7 +242,8 @@ def _rule(n_b, n_p):
 def albedo_nodes(theta_o, width, n_b, n_p):
     """Nodes and weights of a(ω_o) = ∫ f(ω_i, ω_o) ⟨n,ω_i⟩ dω_i over the half vector, n = z, ω_o in
     the xz-plane: ω_i = 2⟨o,h⟩h − o, dω_i = 4⟨o,h⟩ dω_h, with exactly the valid h (θ_h < θ_max(φ),
-    tan θ_max = (R + sin θ_o cos φ)/cos θ_o, R = √(sin²θ_o cos²φ + cos²θ_o)), in θ_h = atan(a tan β)."""
+    tan θ_max = (R + sin θ_o cos φ)/cos θ_o, R = √(sin²θ_o cos²φ + cos²θ_o)), in
+    θ_h = atan(a tan β)."""
     s, ws, phi, wp = _rule(n_b, n_p)
     so, co = np.sin(theta_o), np.cos(theta_o)
     cp = np.cos(phi)
@@ -260,7 +262,8 @@ def albedo_nodes(theta_o, width, n_b, n_p):
 
 
 VIEWS = (0.0, 0.6, 1.2, 1.5)
-WIDTH = {"ggx": lambda x, y: x, "beckmann": lambda x, y: x, "ggx_aniso": lambda x, y: np.sqrt(x * y),
+WIDTH = {"ggx": lambda x, y: x, "beckmann": lambda x, y: x,
+         "ggx_aniso": lambda x, y: np.sqrt(x * y),
          "blinn_phong": lambda x, y: np.sqrt(2 / (x + 2)),
          "ashikhmin_shirley": lambda x, y: np.sqrt(2 / (np.sqrt(x * y) + 2))}
 
@@ -414,8 +417,9 @@ def test_gradients_match_finite_differences():
         g_mat, g_wi, g_wo = jax.tree.map(lambda g: np.asarray(g)[FD_ROWS],
                                          _grad(mat, wi, wo, jnp.asarray(_T)))  # shared program
         # every parameter moves, but η₁ = 1 and the bare films' d = 0 sit on their domain's edge
-        d_mat = jax.tree.map(lambda x: np.where(np.isin(np.asarray(x), (0.0, 1.0)), 0.0, 0.05 * np.abs(
-            np.asarray(x)) * rng.normal(size=np.shape(x))), mat)
+        d_mat = jax.tree.map(lambda x: np.where(
+            np.isin(np.asarray(x), (0.0, 1.0)), 0.0,
+            0.05 * np.abs(np.asarray(x)) * rng.normal(size=np.shape(x))), mat)
         d_wi, d_wo = tangent(pts[:, 0]), tangent(pts[:, 1])
         ana = (sum(np.sum(a.reshape(len(FD_ROWS), -1) * np.ravel(b), -1)
                    for a, b in zip(jax.tree.leaves(g_mat), jax.tree.leaves(d_mat)))
@@ -425,7 +429,8 @@ def test_gradients_match_finite_differences():
         def at(sign, mat=mat, d_mat=d_mat, d_wi=d_wi, d_wo=d_wo):
             m = jax.tree.map(lambda x, d: x + sign * e * d, mat, d_mat)
             with jax.disable_jit():
-                f = M.brdf_value(m, pts[:, 0] + sign * e * d_wi, pts[:, 1] + sign * e * d_wo, _Z, _T)
+                f = M.brdf_value(m, pts[:, 0] + sign * e * d_wi, pts[:, 1] + sign * e * d_wo,
+                                 _Z, _T)
             return np.sum(np.asarray(f), -1)
 
         fd = (at(1) - at(-1)) / (2 * e)

@@ -55,7 +55,8 @@ from .brdf.material import (  # the classic lobes beside the film (brdf/material
     no_specular as no_specular, no_fresnel as no_fresnel, schlick_fresnel as schlick_fresnel,
     dielectric_fresnel as dielectric_fresnel, conductor_fresnel as conductor_fresnel,
     film_fresnel as film_fresnel, no_diffuse as no_diffuse, lambert_diffuse as lambert_diffuse,
-    oren_nayar_diffuse as oren_nayar_diffuse, ashikhmin_shirley_diffuse as ashikhmin_shirley_diffuse,
+    oren_nayar_diffuse as oren_nayar_diffuse,
+    ashikhmin_shirley_diffuse as ashikhmin_shirley_diffuse,
 )
 from .optics.opd import OPDMoments as OPDMoments
 from .realtime.options import ModelOptions as ModelOptions

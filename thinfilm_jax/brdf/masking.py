@@ -29,7 +29,8 @@ Example (at normal incidence and view nothing is masked: G = 1 for every form; S
 G₁ at grazing is 0):
     >>> from thinfilm_jax.brdf import masking
     >>> li = masking.lambda_cos_ggx(1.0, 0.5)
-    >>> float(masking.smith_correlated(1.0, 1.0, li, li)), float(masking.v_cavity(1.0, 1.0, 1.0, 1.0))
+    >>> g2 = masking.smith_correlated(1.0, 1.0, li, li)
+    >>> float(g2), float(masking.v_cavity(1.0, 1.0, 1.0, 1.0))
     (1.0, 1.0)
     >>> float(masking.smith_g1(0.0, masking.lambda_cos_ggx(0.0, 0.5)))
     0.0
@@ -43,7 +44,8 @@ from jax.scipy.special import erfc
 
 from .ndf import _float, exp_cut
 
-__all__ = ["MASKINGS", "lambda_cos_ggx", "lambda_cos_beckmann", "lambda_cos", "lambda_cos_ggx_aniso",
+__all__ = ["MASKINGS", "lambda_cos_ggx", "lambda_cos_beckmann", "lambda_cos",
+           "lambda_cos_ggx_aniso",
            "smith_g1", "smith_separable", "smith_correlated", "v_cavity", "ashikhmin_shirley",
            "visibility_smith_separable", "visibility_smith_correlated", "visibility_v_cavity",
            "visibility_ashikhmin_shirley"]
@@ -85,7 +87,8 @@ def lambda_cos(cos, alpha, ndf):
 
 def lambda_cos_ggx_aniso(w_t, w_b, w_n, alpha_x, alpha_y):
     """L = ω_n Λ(ω) = (√(ω_n² + α_x² ω_t² + α_y² ω_b²) − ω_n)/2 of anisotropic GGX (Heitz 2014,
-    Eq. 86 with the projected roughness); (ω_t, ω_b, ω_n) the unit direction in the frame (t, b, n)."""
+    Eq. 86 with the projected roughness); (ω_t, ω_b, ω_n): the unit direction in the frame
+    (t, b, n)."""
     w_t, w_b, w_n, ax, ay = _float(w_t, w_b, w_n, alpha_x, alpha_y)
     x, y = ax * w_t, ay * w_b
     return 0.5 * (jnp.sqrt(w_n * w_n + x * x + y * y) - w_n)
@@ -131,7 +134,8 @@ def v_cavity(cos_h, cos_i, cos_o, cos_oh):
 
 
 def ashikhmin_shirley(cos_i, cos_o, cos_oh):
-    """The masking implied by Ashikhmin–Shirley's specular denominator: G = min(c_i, c_o)/⟨ω_o,h⟩."""
+    """The masking implied by Ashikhmin–Shirley's specular denominator:
+    G = min(c_i, c_o)/⟨ω_o,h⟩."""
     ci, co, oh = _float(cos_i, cos_o, cos_oh)
     ci, co = _pos(ci), _pos(co)
     return jnp.minimum(ci, co) * _safe_inv(oh)

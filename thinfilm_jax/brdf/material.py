@@ -1,33 +1,39 @@
 r"""`Material`: one specular microfacet lobe × one Fresnel term + one diffuse term, as band values.
 
-    f_j(ω_i, ω_o) = D(h) V(ω_i, ω_o) F_j(⟨h,ω_i⟩) + f_diffuse,j(ω_i, ω_o),   V = G/(4⟨n,ω_i⟩⟨n,ω_o⟩),
+    f_j(ω_i, ω_o) = D(h) V(ω_i, ω_o) F_j(⟨h,ω_i⟩) + f_diffuse,j(ω_i, ω_o),
+    V = G/(4⟨n,ω_i⟩⟨n,ω_o⟩),
 
 h = normalize(ω_i + ω_o), 0 unless ⟨n,ω_i⟩, ⟨n,ω_o⟩ > 0; J = 3 bands of the observer (SPEC §1:
 unit-area bands, so a flat reflectance R gives R in every band). The pieces come from `ndf`
 (D), `masking` (G, V) and `diffuse`; the Fresnel terms from the existing optics:
 
-| Fresnel kind | F_j(c), c = ⟨h,ω_i⟩ |
-|---|---|
-| `"one"` | 1 (the white furnace) |
-| `"schlick"` | `optics.fresnel.fresnel_schlick(f0, c)`, f0 a number or bands (..., J) |
-| `"dielectric"`, `"conductor"` | exact unpolarised R of the bare η₁ | η + iκ interface (`spectral.reflectance.bare_bands`: `optics.fresnel.film_interfaces` with no film) |
-| `"film"` | exact band reflectance of a `Film` at c, `spectral.reflectance.rgb_reflectance` (method "spectral" or "fourier") |
+Fresnel kinds, F_j(c) at c = ⟨h,ω_i⟩:
+
+* "one": 1 (the white furnace);
+* "schlick": `optics.fresnel.fresnel_schlick(f0, c)`, f0 a number or bands (..., J);
+* "dielectric", "conductor": the exact unpolarised R of the bare interface η₁ | η + iκ
+  (`spectral.reflectance.bare_bands`, i.e. `optics.fresnel.film_interfaces` with no film);
+* "film": the exact band reflectance of a `Film` at c, `spectral.reflectance.rgb_reflectance`
+  (method "spectral" or "fourier").
 
 Specular NDFs (`ndf`): "ggx", "beckmann", "ggx_aniso", "blinn_phong", "ashikhmin_shirley",
 "none"; maskings (`masking.MASKINGS`): "smith_correlated", "smith_separable" (Smith Λ of GGX,
 Beckmann, anisotropic GGX, and for Blinn–Phong the Beckmann Λ at Walter's α = √(2/(s + 2)), an
-approximation), "v_cavity", "ashikhmin_shirley", "implicit" (any NDF). The "ashikhmin_shirley" NDF
-of a `Material` is the paper's p(h) (`ndf.ashikhmin_shirley_pdf`, normalised on dω_h, a factor
-κ = √((n_u+1)(n_v+1)/((n_u+2)(n_v+2))) below the projected-area NDF `ndf.ashikhmin_shirley`), so
+approximation that is not the Λ of that D: for rough lobes it gains energy at grazing views,
+directional albedo with F = 1 of 1.40 at s = 0 and 1.014 at s = 10, θ_o = 1.5, ≤ 1 from s = 20
+on, tests/test_brdf_material.py), "v_cavity", "ashikhmin_shirley", "implicit" (any NDF).
+The "ashikhmin_shirley" NDF of a `Material` is the paper's p(h) (`ndf.ashikhmin_shirley_pdf`,
+normalised on dω_h, a factor κ = √((n_u+1)(n_v+1)/((n_u+2)(n_v+2))) below the projected-area NDF `ndf.ashikhmin_shirley`), so
 that `ashikhmin_shirley_lobe` with its default masking "ashikhmin_shirley" is Ashikhmin &
 Shirley's 2000 specular BRDF as published (their Eq. 4):
-√((n_u+1)(n_v+1))/(8π) ⟨n,h⟩^{e(φ_h)} F/(⟨h,ω_o⟩ max(c_i, c_o)). Diffuse kinds: "none", "lambert", "oren_nayar",
-"ashikhmin_shirley" (coupled to the specular layer through R_s = F_j(1), its Eq. 5).
+√((n_u+1)(n_v+1))/(8π) ⟨n,h⟩^{e(φ_h)} F/(⟨h,ω_o⟩ max(c_i, c_o)).
+Diffuse kinds: "none", "lambert", "oren_nayar", "ashikhmin_shirley" (coupled to the specular
+layer through R_s = F_j(1), their Eq. 5).
 
 The parameters are pytree leaves (`jax.grad` with respect to a `Material` gives a `Material` of
 gradients); the names are static aux data (`jit` specialises on them). The constructors and
-`brdf_value` check concrete inputs and raise a `ValueError` naming the argument; inside `jit`
-values are not checked (see `thinfilm_jax.checked` for the range checks of the parameters).
+`brdf_value` check concrete inputs and raise a `ValueError` naming the argument; traced values
+(inside `jit`, `vmap`, `grad`) are not checked.
 
 Example (a rough gold-like conductor: a GGX lobe with Schlick Fresnel over Lambert; the value
 is symmetric in ω_i ↔ ω_o):
@@ -420,6 +426,7 @@ def brdf_value(material: Material, wi, wo, n, t=None):
                                  f"|⟨t, n⟩| = {float(dots.max())!r}")
     V.check_broadcast(shapes)
     if t is not None:
-        t = jnp.broadcast_to(jnp.asarray(t), jnp.broadcast_shapes(*(np.shape(v) for _, v in shapes)))
+        shape = jnp.broadcast_shapes(*(np.shape(v) for _, v in shapes))
+        t = jnp.broadcast_to(jnp.asarray(t), shape)
     return _brdf(material, wi, wo, n, t)
 

@@ -48,6 +48,16 @@ from .shading.ibl import envmap_radiance as envmap_radiance
 from .spectral.lut import ShatLUT as ShatLUT
 from .spectral.lut import build_shat_lut as build_shat_lut
 from .brdf.microfacet import albedo as albedo
+from .brdf.material import (  # the classic lobes beside the film (brdf/material.py)
+    Material as Material, brdf_value as brdf_value, ggx_lobe as ggx_lobe,
+    beckmann_lobe as beckmann_lobe, ggx_aniso_lobe as ggx_aniso_lobe,
+    blinn_phong_lobe as blinn_phong_lobe, ashikhmin_shirley_lobe as ashikhmin_shirley_lobe,
+    no_specular as no_specular, no_fresnel as no_fresnel, schlick_fresnel as schlick_fresnel,
+    dielectric_fresnel as dielectric_fresnel, conductor_fresnel as conductor_fresnel,
+    film_fresnel as film_fresnel, no_diffuse as no_diffuse, lambert_diffuse as lambert_diffuse,
+    oren_nayar_diffuse as oren_nayar_diffuse,
+    ashikhmin_shirley_diffuse as ashikhmin_shirley_diffuse,
+)
 from .optics.opd import OPDMoments as OPDMoments
 from .realtime.options import ModelOptions as ModelOptions
 from .optics.opd import taylor_opd_moments as taylor_opd_moments

@@ -70,7 +70,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import erfc
+
+from . import masking as _masking
+from . import ndf as _ndf
 
 __all__ = [
     "PatchQuadrature",
@@ -92,7 +94,6 @@ __all__ = [
 
 NDFS = ("ggx", "beckmann")
 DEFAULT_QUADRATURE = (48, 48)  # (n_u, n_phi) of `patch_quadrature`: converged to ~1e-12 (tests)
-_INV_SQRT_PI = float(1.0 / np.sqrt(np.pi))  # Python float: weakly typed under strict promotion
 
 
 class PatchQuadrature(NamedTuple):
@@ -137,9 +138,7 @@ def _asfloat(*xs):
     return tuple(jnp.asarray(x, dt) for x in xs)
 
 
-def _clamp01(x):
-    """Clamp to [0, 1] keeping the full one-sided gradient at the ends (jnp.clip halves it)."""
-    return jnp.where(x >= 0, jnp.where(x <= 1, x, 1), 0)
+_clamp01 = _ndf.clamp01  # [0, 1] with the full one-sided gradient at the ends
 
 
 def _view_cos_sin(theta_o):
@@ -150,23 +149,14 @@ def _view_cos_sin(theta_o):
     return jnp.where(c >= 0, c, 0), jnp.sin(theta_o)
 
 
-def _exp_cut(dtype):
-    """Exponent above which exp(−x) underflows to 0 in `dtype`."""
-    return float(-np.log(np.finfo(dtype).tiny)) * 0.99
+_exp_cut = _ndf.exp_cut  # exponent above which exp(−x) underflows in a dtype
 
 
 def _lambda_cos(cos, alpha, ndf):
-    """L = cos θ · Λ(θ) for cos θ ∈ [0, 1]; finite (L(0) = α/2 GGX, α/(2√π) Beckmann)."""
-    a2 = alpha * alpha
-    if ndf == "ggx":
-        return 0.5 * (jnp.sqrt(a2 + (1 - a2) * cos * cos) - cos)
-    sin2 = jnp.clip(1 - cos * cos, 0, 1)
-    ok = cos * cos < _exp_cut(cos.dtype) * a2 * sin2  # else a² huge: Λ = 0 to working precision
-    cs = jnp.where(ok, cos, 0)
-    ss = jnp.sqrt(jnp.where(ok, sin2, 1))
-    a = cs / (alpha * ss)  # a = cot θ / α
-    lam = -0.5 * cs * erfc(a) + (0.5 * _INV_SQRT_PI) * alpha * ss * jnp.exp(-a * a)
-    return jnp.where(ok, jnp.maximum(lam, 0), 0)
+    """L = cos θ · Λ(θ) for cos θ ∈ [0, 1]; finite (L(0) = α/2 GGX, α/(2√π) Beckmann).
+
+    The formulas live in `masking` (`lambda_cos_ggx`, `lambda_cos_beckmann`)."""
+    return _masking.lambda_cos(cos, alpha, ndf)
 
 
 def _g2_denominator(ci, co, alpha, ndf):
@@ -240,19 +230,11 @@ def _inner_rule(n, ndf):
 # ----------------------------------------------------------------------------- BRDF pieces
 @functools.partial(jax.jit, static_argnames=("ndf",))
 def normal_distribution(cos_h, alpha, ndf="ggx"):
-    """Normal distribution D(h) as a function of cos θ_h (0 for cos θ_h ≤ 0)."""
+    """Normal distribution D(h) as a function of cos θ_h (0 for cos θ_h ≤ 0); `ndf.ggx`,
+    `ndf.beckmann`."""
     _check_ndf(ndf)
     cos_h, alpha = _asfloat(cos_h, alpha)
-    a2 = alpha * alpha
-    c2 = _clamp01(cos_h) ** 2
-    s2 = 1 - c2
-    if ndf == "ggx":
-        d = a2 * c2 + s2
-        return jnp.where(cos_h > 0, a2 / (np.pi * d * d), 0)
-    ok = (cos_h > 0) & (s2 < _exp_cut(cos_h.dtype) * a2 * c2)
-    c2s = jnp.where(ok, c2, 1)
-    expo = -jnp.where(ok, s2, 0) / (a2 * c2s) - 2 * jnp.log(c2s)
-    return jnp.where(ok, jnp.exp(expo) / (np.pi * a2), 0)
+    return _ndf.ggx(cos_h, alpha) if ndf == "ggx" else _ndf.beckmann(cos_h, alpha)
 
 
 @functools.partial(jax.jit, static_argnames=("ndf",))

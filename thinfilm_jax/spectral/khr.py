@@ -113,7 +113,10 @@ def sensitivity_rec709(opd, shift) -> Array:
     `opd` in nm and `shift` (rad) broadcast; float64 constants cast to their dtype."""
     opd, shift = jnp.asarray(opd), jnp.asarray(shift)
     dtype = jnp.result_type(opd, shift, float)
+    opd, shift = jnp.broadcast_arrays(opd, shift)
     weights, k, w = (jnp.asarray(t, dtype) for t in _sensitivity_tables())
+    lead = (1,) * opd.ndim  # explicit ranks: no implicit rank promotion
+    k, w = k.reshape(lead + k.shape), w.reshape(lead + w.shape)
     x = opd[..., None]
     terms = jnp.cos(k * x + shift[..., None]) * jnp.exp(-w * (x * x))
     return jnp.matmul(terms, weights, precision=jax.lax.Precision.HIGHEST)

@@ -335,3 +335,19 @@ def test_float32_close_to_float64():
     a = np.asarray(khr_reflectance(film.astype(jnp.float32), c.astype(np.float32)))
     b = np.asarray(khr_reflectance(film, c))
     assert a.dtype == np.float32 and np.abs(a - b).max() < 2e-6, np.abs(a - b).max()
+
+
+def test_patch_radiance_khr_is_albedo_times_khr():
+    """`patch_radiance(method="khr")`: as `ideal`, the reflectance at h = n (cos θ_o) times the
+    albedo A(θ_o, α); d = 0 keeps the extension's formula (not the bare-base shortcut);
+    observers other than the default are rejected (the output is Rec. 709 RGB)."""
+    opts = tf.ModelOptions(quadrature=(16, 16))
+    films = tf.Film(np.array([0.0, 450.0]), 1.33, 1.5)
+    theta, alpha = np.array([0.3, 1.1]), 0.25
+    got = np.asarray(tf.patch_radiance(films, theta, alpha, method="khr", options=opts))
+    a = np.asarray(tf.albedo(theta, alpha, quadrature=(16, 16)))
+    want = a[:, None] * np.asarray(khr_reflectance(films, np.cos(theta)))
+    assert np.abs(got - want).max() <= 1e-15
+    with pytest.raises(ValueError, match="method='khr'"):
+        tf.patch_radiance(films, theta, alpha, method="khr", observer="cie_1931_2",
+                          options=opts)

@@ -145,6 +145,8 @@ def test_thickness_texture_round_trip(tmp_path, bits):
     got, factor = G.read_gltf(tmp_path / "film.gltf")
     np.testing.assert_allclose(got.thickness, back, rtol=0, atol=1e-9)
     assert tuple(got[1:]) == (1.33, 1.5, 0.0, 1.0) and factor == 0.9
+    with pytest.raises(ValueError, match="no material"):
+        G.read_gltf(tmp_path / "film.gltf", material=3)
 
 
 def test_thickness_texture_bad_input(tmp_path):

@@ -333,7 +333,10 @@ def read_gltf(path, material: int = 0, *, eta_base=None, kappa_base=None):
     their files (`film_from_gltf` with the sampled G and R channels)."""
     path = Path(path)
     doc = json.loads(path.read_text(encoding="utf-8"))
-    mat = doc["materials"][material]
+    try:
+        mat = doc["materials"][material]
+    except (KeyError, IndexError, TypeError):
+        raise ValueError(f"{path} has no material {material!r}") from None
     ext = _mapping(f"extensions.{EXTENSION}", mat.get("extensions", {}).get(EXTENSION))
     g = r = None
     if "iridescenceThicknessTexture" in ext:

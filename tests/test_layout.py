@@ -17,7 +17,8 @@ def test_layout_matches_tree():
     assert not missing and not extra, f"add to README Layout: {missing}; remove: {extra}"
 
 
-LAYERS = ("core", "optics", "spectral", "brdf", "realtime", "shading", "fit", "studies", "cli")
+LAYERS = ("core", "optics", "spectral", "brdf", "realtime", "shading", "fit", "interop",
+          "studies", "cli")
 
 
 def _imports(path: Path, package: str):
@@ -44,8 +45,8 @@ def _imports(path: Path, package: str):
 
 
 def test_layers_import_only_downwards():
-    """core → optics → spectral → brdf → realtime → shading → fit → studies → cli: a module
-    imports its own layer and those before it, never one after (README "## Layout")."""
+    """core → optics → spectral → brdf → realtime → shading → fit → interop → studies → cli: a
+    module imports its own layer and those before it, never one after (README "## Layout")."""
     package = ROOT / "thinfilm_jax"
     bad = []
     for path in sorted(package.rglob("*.py")):

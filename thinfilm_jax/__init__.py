@@ -43,6 +43,8 @@ from .fit.film_fit import FitOptions as FitOptions
 from .fit.film_fit import FitResult as FitResult
 from .fit.film_fit import fit_film as fit_film
 from .fit.film_fit import fit_spectrum as fit_spectrum
+from .interop.gltf import film_from_gltf as film_from_gltf
+from .interop.gltf import film_to_gltf as film_to_gltf
 from .shading.ibl import METHODS as ENVMAP_METHODS
 from .shading.ibl import envmap_radiance as envmap_radiance
 from .spectral.lut import ShatLUT as ShatLUT
@@ -66,6 +68,7 @@ from .shading.patch import patch_radiance as patch_radiance
 from .shading.patch import patch_radiance_mc as patch_radiance_mc
 from .shading.prefilter import PrefilteredEnvMap as PrefilteredEnvMap
 from .shading.prefilter import prefilter_envmap as prefilter_envmap
+from .spectral.khr import khr_reflectance as khr_reflectance
 from .spectral.reflectance import rgb_reflectance as rgb_reflectance
 from .optics.series import SeriesTerms as SeriesTerms
 from .shading.sources import Sources as Sources

@@ -11,6 +11,7 @@ $$ L_j(\theta_o, \alpha) = \int \tilde\rho(\omega_i, \omega_o)\langle n, \omega_
 | ``filtered_gt_opd``   | A · K 29 with the true mean and std of D under p_R               |
 | ``filtered``          | A · K 29 with μ_ω, Σ_ω of the split-sum prefiltered uniform environment |
 | ``improved``          | A · K 29 per equal-probability bin of cos θ₁ (`improved`, docs/improved.md) |
+| ``khr``               | A · glTF `F_iridescence`(cos θ_o) (SPEC §10, h = n; linear Rec. 709) |
 
 A(θ_o, α) = Σ_n w_n is the prefiltered BRDF (exact quadrature, K 12). The quadrature
 (`microfacet.patch_quadrature`) is deterministic and film-independent; its convergence and
@@ -52,11 +53,12 @@ from ..brdf.microfacet import (light_moments, patch_quadrature, sample_patch_mc,
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..optics.opd import cos_incidence_from_projection, opd_moments_exact, project_light_moments
 from ..realtime.options import ModelOptions, check_options
+from ..spectral.khr import khr_bands
 from ..spectral.reflectance import bare_bands, choose_layer, spectral_bands
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 
 METHODS = ("reference", "ideal", "filtered_gt_moments", "filtered_gt_opd", "filtered",
-           "improved")
+           "improved", "khr")
 
 
 def _check_patch_args(film, theta_o, alpha, method, observer, options):
@@ -135,6 +137,11 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
     """
     o = options
     quad = patch_quadrature(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
+    if method == "khr":  # as `ideal`; its d = 0 is its own formula, not the bare base
+        if observer != DEFAULT_OBSERVER:
+            raise ValueError(f"method='khr' gives linear Rec. 709 RGB: observer={observer!r} "
+                             f"does not apply (leave the default)")
+        return jnp.sum(quad.weight) * khr_bands(film, jnp.cos(theta_o))
     if o.layer == "bare":
         return _bare_patch(film, theta_o, alpha, quad, method, observer, o, table)
     if method == "reference":

@@ -4,6 +4,8 @@ r"""Band-integrated reflectance R_j(θ₁) of a film (SPEC §4, K 2–4).
 * ``method="fourier"``: BB17's Fourier-domain sum truncated after M = `terms` orders,
   R_j = C₀Ŝ_j(0) + Σ_{m≤M} C_m[e^{imφ₂}Ŝ_j(−mD) + e^{−imφ₂}Ŝ_j(mD)], with Ŝ tabulated on the
   same samples (converges to "spectral" as M grows) or the Gaussian closed form.
+* ``method="khr"``: glTF `KHR_materials_iridescence`'s `F_iridescence` in linear Rec. 709 RGB
+  (SPEC §10, `khr.khr_reflectance`); `observer` does not apply (only its default is accepted).
 
 Scene specialisation ``layer``: a film of thickness 0 is no film, R(θ₁, λ) = R₁₃(θ₁) of the
 bare outer|base interface, flat in λ for the non-dispersive base, so that R_j = R₁₃ Ŝ_j(0)
@@ -26,9 +28,10 @@ from ..optics.airy import broadcast_all, choose_arithmetic, polarised_reflectanc
 from ..core.film import Film
 from ..optics.fresnel import film_interfaces
 from ..optics.series import fourier_band_reflectance, series_terms
+from .khr import _khr_jit
 from .spectra import DEFAULT_OBSERVER, SHAT_METHODS, get_observer, sensitivity_ft, shat_at_zero
 
-METHODS = ("spectral", "fourier")
+METHODS = ("spectral", "fourier", "khr")
 LAYERS = ("auto", "film", "bare")
 
 
@@ -72,7 +75,10 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
         film: `Film`.
         cos_theta: cos θ₁ ∈ [0, 1].
         observer: "stiles_burch_1959_10" (RGB, default) or "cie_1931_2" (XYZ).
-        method: "spectral" (exact quadrature of Airy over λ) or "fourier" (K 4, M = terms).
+        method: "spectral" (exact quadrature of Airy over λ), "fourier" (K 4, M = terms) or
+            "khr" (glTF `KHR_materials_iridescence`, SPEC §10: (..., 3) linear Rec. 709 RGB;
+            M = 2 fixed, so `terms` must stay 2, `observer` and `shat` at their defaults;
+            `arithmetic` and `layer` choose paths of the exact methods and are ignored).
         terms: M ≥ 0, number of Fourier orders (method="fourier" only).
         shat: "exact" | "gaussian" source of Ŝ for method="fourier".
         arithmetic: "auto" | "real" | "complex" arithmetic path (see `airy.choose_arithmetic`).
@@ -91,6 +97,14 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
     # any integer type (np.arange(...) elements too), not bool; a plain int for the jit cache
     terms = V.check_int("terms", terms, 0)
     V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta)])
+    if method == "khr":
+        for name, value, default in (("observer", observer, DEFAULT_OBSERVER),
+                                     ("terms", terms, 2), ("shat", shat, "exact")):
+            if value != default:
+                raise ValueError(f"method='khr' is the glTF extension's fixed formula (linear "
+                                 f"Rec. 709 RGB, M = 2): {name}={value!r} does not apply; "
+                                 f"leave {name} at its default {default!r}")
+        return _khr_jit(film, cos_theta)
     return _rgb_jit(film, cos_theta, observer, method, terms, shat,
                     choose_arithmetic(film, arithmetic), choose_layer(film, layer))
 

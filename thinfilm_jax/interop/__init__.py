@@ -1,0 +1,12 @@
+"""Exchange with other formats, the layer after `fit` and before `studies`: a `Film` to and
+from a glTF 2.0 material with `KHR_materials_iridescence` and its thickness texture (`gltf`),
+and OpenPBR Surface's `thin_film_*` parameters (`openpbr`). Imports `core`, `optics`,
+`spectral`.
+
+Example (glTF nm and OpenPBR µm describe the same film):
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.interop import gltf, openpbr
+    >>> film, factor = gltf.film_from_gltf(gltf.film_to_gltf(Film(400.0, 1.3, 1.5)))
+    >>> openpbr.film_to_openpbr(film, factor)["thin_film_thickness"]
+    0.4
+"""

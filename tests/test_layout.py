@@ -90,3 +90,30 @@ def test_no_import_cycle_between_modules():
     for m in sorted(graph):
         if m not in state:
             visit(m, [])
+
+
+def test_release_metadata_agrees():
+    """One version everywhere: pyproject, `thinfilm_jax.__version__` (what `--version`
+    prints), CITATION.cff, and the newest CHANGELOG.md entry."""
+    import tomllib
+
+    import thinfilm_jax
+
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text("utf-8"))["project"]["version"]
+    assert thinfilm_jax.__version__ == version
+    assert re.search(rf"^version: {re.escape(version)}$", (ROOT / "CITATION.cff").read_text("utf-8"),
+                     flags=re.M)
+    first = re.search(r"^## (\S+)", (ROOT / "CHANGELOG.md").read_text("utf-8"), flags=re.M)
+    assert first and first.group(1) == version
+
+
+def test_no_tracker_references():
+    """Code, tests, notebooks and docs cite papers, equations, docs pages and tests, never the
+    project's work tracker (numbered tickets), which a reader of the package cannot open."""
+    pattern = re.compile(r"\bissues?\s*#?\s*\d+|\bthe issue\b|\bissue tracker\b|/issues/\d+",
+                         flags=re.I)
+    files = [p for d in ("thinfilm_jax", "tests", "docs", "notebooks") for p in (ROOT / d).rglob("*")
+             if p.suffix in {".py", ".md", ".ipynb"}] + [ROOT / "README.md", ROOT / "CHANGELOG.md"]
+    hits = [f"{p.relative_to(ROOT)}: {m.group(0)!r}" for p in files
+            for m in pattern.finditer(p.read_text("utf-8", errors="replace"))]
+    assert not hits, "\n".join(hits)

@@ -80,4 +80,4 @@ from .spectral.spectra import OBSERVERS as OBSERVERS
 from .spectral.spectra import get_observer as get_observer
 from .spectral.spectra import sensitivity_ft as sensitivity_ft
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

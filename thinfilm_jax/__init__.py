@@ -4,15 +4,15 @@ Exact spectral reference (Airy), Belcour & Barla 2017 Fourier-domain band integr
 Kneiphof et al. 2019 filtered reflectance for rough surfaces, and a uniform-lighting patch
 integrator. Conventions (docs/SPEC.md): nm, radians, GGX α, colour bands of unit area.
 
-The public face is this file; modules hold one concept each:
-`fresnel` (interface amplitudes), `airy` (exact R), `series` (BB17 terms), `spectra`
-(observers, Ŝ), `reflectance` (band R_j), `lut` (Ŝ(μ,σ²) table), `opd` (D distribution),
-`filtered` (K 29), `improved` (this library's improved real-time model, docs/improved.md: K 29
-per equal-probability bin of cos θ₁, `method="improved"`), `microfacet` (GGX/Smith, patch
-quadrature), `patch` (SPEC §7 methods), `sources` (suns split from a map, shaded apart),
-`colorimetry` (XYZ/sRGB/ΔE), `fit` (optimistix fits), `cli`. Studies and benchmarks
-(Figure 7, error vs run time, peers, specialisations, stability) live outside the core in
-`thinfilm_jax.studies`, which nothing here imports.
+The public face is this file; the package is grouped in layers, each importing only those
+before it: `core` (the `Film` pytree, input checks, file output, compilation cache,
+sharding) → `optics` (interface amplitudes, exact Airy R, BB17 series terms, the D
+distribution) → `spectral` (observers and Ŝ, band reflectances, the Ŝ(μ,σ²) table, the RGB
+basis of maps, colorimetry, glTF's iridescence) → `brdf` (normal distributions, masking,
+diffuse terms, `Material`, patch quadrature) → `realtime` (K 29, the improved model,
+per-point kernels) → `shading` (uniform-light patch, environment maps, prefiltering, suns,
+the exact and real-time IBL) → `fit` (optimistix fits, thickness maps) → `interop` (glTF,
+OpenPBR) → `studies` (Figure 7, benchmarks, stability; nothing below imports it) → `cli`.
 
 Example (SPEC §4: the Fourier path K 4 converges to the exact spectral bands, which share its
 λ quadrature):

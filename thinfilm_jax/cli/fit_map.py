@@ -14,6 +14,15 @@ pixels per second warm and the compilation time separately (the warm-up batch's 
 minus its warm cost); with ``--free thickness
 eta_film`` also ``eta_film_map.npy``).
 
+``--gltf DIR`` also writes the map as a glTF 2.0 material (`thinfilm_jax.interop.gltf.write_gltf`,
+SPEC §10): ``DIR/fit_map.gltf`` with `KHR_materials_iridescence` (η₂ as `iridescenceIor`,
+minimum and maximum covering the map, factor 1) and `KHR_materials_ior` (η₃), and the
+`iridescenceThicknessTexture` ``DIR/fit_map_thickness.png`` (G channel, linear, 8-bit or
+``--gltf-bits 16``; it gives back the map to (max − min)/(2(2ᵇ − 1)) nm). What glTF cannot
+hold is a usage error before the fit: κ₃ > 0 (glTF's metals are a Schlick tint, its
+dielectrics a real IOR; fit with ``--kappa-base 0`` or leave out ``--gltf``), η₁ ≠ 1, and a
+fitted η₂ map (``--free eta_film``: the extension has one `iridescenceIor`).
+
 Example::
 
     thinfilm-jax fit-map wedge.npy --theta-o 20 --alpha 0.2 --eta-film 1.46 \\
@@ -80,8 +89,13 @@ def add_parser(sub) -> None:
     p.add_argument("--out", default="fit_map", help="output folder (default: fit_map)")
     p.add_argument("--devices", type=int, metavar="K",
                    help="split each batch across the first K devices (default: one device)")
+    p.add_argument("--gltf", metavar="DIR",
+                   help="also write DIR/fit_map.gltf and its thickness texture "
+                        "DIR/fit_map_thickness.png (glTF KHR_materials_iridescence)")
+    p.add_argument("--gltf-bits", dest="gltf_bits", type=int, choices=[8, 16], default=8,
+                   help="bits of the glTF thickness texture (8)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=run_fit_map_cli)
+    p.set_defaults(func=run_fit_map_cli, usage_error=p.error)
 
 
 def _load_image(path: Path) -> np.ndarray:
@@ -143,10 +157,38 @@ def _save_png(path: Path, d: np.ndarray, title: str) -> None:
     plt.close(fig)
 
 
+def _gltf_problem(args) -> str | None:
+    """Why the film of `args` cannot be written as a glTF material (None: it can)."""
+    if "eta_film" in args.free:
+        return ("glTF holds one iridescenceIor, not the eta_film map of --free eta_film "
+                "(fit the thickness alone)")
+    gltf = Path(args.gltf)
+    if gltf.exists() and not gltf.is_dir():
+        return f"{gltf} exists and is not a folder"
+    from ..core.film import Film
+    from ..interop.gltf import film_to_gltf
+
+    try:  # the film's scalar fields, as the written material will hold them
+        film_to_gltf(Film(0.0, args.eta_film, args.eta_base, args.kappa_base, args.eta_outer))
+    except ValueError as e:
+        hint = (" — fit with --kappa-base 0 or leave out --gltf"
+                if args.kappa_base > 0 else "")
+        return f"{e}{hint}"
+    return None
+
+
 def run_fit_map_cli(args) -> int:
-    """Read, check, fit (a warm-up batch first: compile time measured apart), write."""
+    """Read, check, fit (a warm-up batch first: compile time measured apart), write.
+
+    With ``--gltf`` a film glTF cannot hold (`_gltf_problem`) is a usage error (exit 2)
+    before anything is read or fitted.
+    """
     from ._checks import _devices, _enable_x64
 
+    if getattr(args, "gltf", None) is not None:
+        problem = _gltf_problem(args)
+        if problem is not None:
+            args.usage_error(f"argument --gltf: {problem}")
     lo, hi = args.thickness_range
     if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo < hi):
         raise ValueError(f"--thickness-range must be 0 <= LO < HI, got {lo} {hi}")
@@ -192,13 +234,27 @@ def run_fit_map_cli(args) -> int:
              f"η₃={args.eta_base:g}+{args.kappa_base:g}i, method={args.method}, "
              f"τ={args.smoothness if args.smoothness else 'none'} nm")
     _save_png(out / "thickness_map.png", d, title)
+    gltf = None
+    if getattr(args, "gltf", None) is not None:
+        from ..interop.gltf import EXTENSION, write_gltf
+
+        gdir = Path(args.gltf)
+        gdir.mkdir(parents=True, exist_ok=True)
+        doc = write_gltf(gdir / "fit_map.gltf", Film(d, args.eta_film, args.eta_base,
+                                                     args.kappa_base, args.eta_outer),
+                         bits=args.gltf_bits)
+        ext = doc["materials"][0]["extensions"][EXTENSION]
+        gltf = {"folder": str(gdir), "files": ["fit_map.gltf", doc["images"][0]["uri"]],
+                "bits": args.gltf_bits,
+                "thickness_minimum_nm": ext["iridescenceThicknessMinimum"],
+                "thickness_maximum_nm": ext["iridescenceThicknessMaximum"]}
     pct = (5, 25, 50, 75, 95)
     summary = {
         "image": str(args.image), "shape": [h, w],
         "settings": {k: getattr(args, k) for k in (
             "theta_o", "theta_o_map", "alpha", "eta_film", "eta_base", "kappa_base",
             "eta_outer", "free", "smoothness", "sigma", "thickness_range", "grid", "method",
-            "observer", "chunk", "devices")},
+            "observer", "chunk", "devices", "gltf", "gltf_bits")},
         "bands": list(get_observer(args.observer).band_names),
         "thickness_nm": {f"p{q}": float(np.percentile(d, q)) for q in pct}
         | {"min": float(d.min()), "max": float(d.max())},
@@ -212,6 +268,8 @@ def run_fit_map_cli(args) -> int:
         "outputs": ["thickness_map.npy", "thickness_map.png", "fit_map.json"]
         + (["eta_film_map.npy"] if "eta_film" in args.free else []),
     }
+    if gltf is not None:
+        summary["gltf"] = gltf
     if "eta_film" in args.free:
         eta = np.asarray(res.eta_film)
         summary["eta_film"] = {f"p{q}": float(np.percentile(eta, q)) for q in pct}
@@ -220,4 +278,8 @@ def run_fit_map_cli(args) -> int:
           f"thickness {d.min():.1f}–{d.max():.1f} nm (median {np.median(d):.1f}), residual "
           f"RMS/σ median {np.median(rms):.2f}; {res.pixels_per_second:.0f} pixels/s warm, "
           f"compile {compile_s:.1f} s")
+    if gltf is not None:
+        print(f"wrote {gltf['folder']}/{gltf['files'][0]}, {gltf['files'][1]}: "
+              f"iridescenceThicknessMinimum {gltf['thickness_minimum_nm']:.2f} nm, "
+              f"…Maximum {gltf['thickness_maximum_nm']:.2f} nm, {args.gltf_bits}-bit")
     return 0

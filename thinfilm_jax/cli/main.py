@@ -142,7 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "η₂=1.3, η₃=2.0+0.5i, d=650 nm; varying: thickness texture "
                          "(repeatable; default all)")
     rd.add_argument("--method", action="append",
-                    choices=["reference", "mc", "ideal", "filtered", "improved"],
+                    choices=["reference", "mc", "ideal", "filtered", "improved", "khr"],
                     help="methods, in columns (repeatable; default reference, ideal, "
                          "filtered, improved)")
     rd.add_argument("--alphas", type=float, nargs="+", help="α of the fig3 sweep "

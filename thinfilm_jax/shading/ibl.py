@@ -9,6 +9,7 @@ $$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega
 | `mc`        | GGX visible-normal sampling (Heitz 2018), weight G₂/G₁, exact spectral R_jk per sample, nearest-texel radiance; fixed key and count |
 | `ideal`     | A(θ_o, α) · Σ_k R_jk(cos θ_o) P_k(ω_r, α): BB17 under the split sum (`kernels.ideal_kernel`, Ŝ from the LUT at σ = 0 by default) |
 | `filtered`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_r, α), R̄ = K 29 with the prefiltered moments μ_ω, Σ_ω (`kernels.filtered_kernel`) |
+| `khr`       | A(θ_o, α) · F_iridescence(cos θ_o) ⊙ P(ω_r, α): glTF `KHR_materials_iridescence` (SPEC §10, `spectral.khr`) at h = n as `ideal`, per channel: its linear Rec. 709 RGB times the map's linear RGB, the vec3 Fresnel × vec3 prefiltered specular product glTF engines compute (the Khronos sample renderer's `pbr.frag` reads F_iridescence at ⟨n, v⟩ and multiplies the prefiltered radiance by it with no split-sum scale: its value is this one over A); `cross_band`, `options` and the map's Ŝ table do not apply; a map with split sources is refused |
 | `improved`  | A(θ_o, α) · (1/K) Σ_b Σ_k R_jk(bin b) P_k(ω_μ,b, α_eff,b): K 29 per equal-probability bin b of cos θ₁, each bin times the prefiltered radiance of its own part of the lobe (tabulated mean direction and equal-variance level; near normal view their mean moved to the whole lobe's read) (`ibl.improved_envmap`, docs/improved.md) |
 
 R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the per-channel
@@ -56,6 +57,7 @@ from ..optics.fresnel import safe_sqrt
 from ..realtime.improved import (BinTable, _bilinear, bin_table, improved_bins, lookup_bins,
                        lookup_lobe)
 from ..realtime.kernels import filtered_kernel, ideal_kernel
+from ..spectral.khr import khr_bands
 from ..spectral.lut import build_shat_lut
 from ..realtime.options import ModelOptions, check_options
 from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered, lookup_radiance,
@@ -64,7 +66,7 @@ from .sources import source_radiance
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from ..spectral.uplift import cross_band_name
 
-METHODS = ("reference", "mc", "ideal", "filtered", "improved")
+METHODS = ("reference", "mc", "ideal", "filtered", "improved", "khr")
 REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST
 DEFAULT_SOURCES = 4  # suns split from a map that `improved` prefilters itself
@@ -85,7 +87,10 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         normal, view: unit world vectors (..., 3) (z-up); view points toward the eye.
         envmap: `EnvMap` (any method; real-time methods prefilter it on the host each call)
             or `PrefilteredEnvMap` (real-time methods only; build it once).
-        method: "reference" | "mc" | "ideal" | "filtered" | "improved".
+        method: "reference" | "mc" | "ideal" | "filtered" | "improved" | "khr" (glTF
+            `F_iridescence` in linear Rec. 709 under the split sum, module table; its
+            observer must stay the default, and a `PrefilteredEnvMap` with sources is
+            refused: engines shade the prefiltered map only).
         observer: colour bands.
         options: `ModelOptions` (default `REALTIME_OPTIONS`: shat="lut", the map's table):
             terms = Fourier orders M and shat = Ŝ source of the real-time methods,
@@ -112,6 +117,9 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
     V.check_choice("method", method, METHODS)
     V.check_choice("observer", observer, OBSERVERS)
+    if method == "khr" and observer != DEFAULT_OBSERVER:
+        raise ValueError(f"method='khr' gives linear Rec. 709 RGB: observer={observer!r} "
+                         f"does not apply (leave the default)")
     options = check_options(options)
     if options.ndf != "ggx":
         raise ValueError(f"envmap_radiance supports ndf='ggx' only (the prefiltered maps and "
@@ -133,7 +141,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
                                ("normal", np.zeros(np.shape(normal)[:-1])),
                                ("view", np.zeros(np.shape(view)[:-1]))])
     arithmetic = choose_arithmetic(film, options.arithmetic)
-    realtime = method in ("ideal", "filtered", "improved")
+    realtime = method in ("ideal", "filtered", "improved", "khr")
     if isinstance(envmap, PrefilteredEnvMap):
         if not realtime:
             raise ValueError(f"method={method!r} integrates the map itself: pass an EnvMap, "
@@ -145,6 +153,9 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         pref = prefilter_envmap(envmap, observer=observer, sources=sources)
     else:
         env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
+    if method == "khr" and pref.has_sources:
+        raise ValueError("method='khr' shades the prefiltered map only (as glTF engines do): "
+                         "prefilter it with sources=0")
     dtype = jnp.result_type(alpha, normal, view, *film, float)
     args = [jnp.broadcast_to(jnp.asarray(x, dtype), shape) for x in (*film, alpha)]
     nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
@@ -213,6 +224,8 @@ def _map_points(film, alpha, normal, view, pref, cfg):
     sqa = jnp.sqrt(alpha)
     rad, mom = lookup_prefiltered(pref, refl, sqa)
     a = lookup_albedo(pref, co, sqa)
+    if method == "khr":  # per channel: Rec. 709 F_iridescence(cos θ_o) × the map's RGB
+        return jnp.where(up[..., None], a[..., None] * khr_bands(film, co) * rad, 0.0)
     obs = cross_band_name(observer) if cross else observer
     lut = pref.lut if cross else None
     if shat == "lut" and not cross:  # the diagonal path reads the plain bands' table

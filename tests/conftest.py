@@ -34,12 +34,23 @@ import pytest  # noqa: E402
 # worker; tests that share nothing expensive with their file get units of their own, so that
 # long tests run on both workers: each notebook runs in its own kernel, and the stiff grids of
 # tests/test_stability.py share one compiled group per dtype (`stability._patch_group`).
+# Long tests that build everything they need themselves (no module fixture, no program
+# another test of their file compiles): one unit per parametrisation. The persistent
+# compilation cache above still shares a program two units trace alike.
+ALONE = ("tests/test_ibl.py::test_stiff_inputs_finite_and_bounded[",
+         "tests/test_ibl.py::test_gradients_finite[",
+         "tests/test_sources.py::test_gradients_finite[")
+
+
 def _unit(nodeid: str) -> str:
     path, _, name = nodeid.partition("::")
-    if path.endswith("test_notebooks.py") or name == "test_fitting_notebook_executes":
+    if (path.endswith("test_notebooks.py") or name == "test_fitting_notebook_executes"
+            or nodeid.startswith(ALONE)):
         return nodeid
     if path.endswith("test_stability.py"):
-        return f"{path}:{'float32' if nodeid.endswith('-float32]') else 'float64'}"
+        # the patch grids (one shared compiled group per dtype) apart from the other checks
+        group = "patch" if name.startswith("test_stiff_inputs[patch_radiance") else "other"
+        return f"{path}:{'float32' if nodeid.endswith('-float32]') else 'float64'}:{group}"
     return path
 
 
@@ -47,7 +58,7 @@ def _unit(nodeid: str) -> str:
 # dtype on the 2-core machine; matched anywhere in the unit): xdist's own order (most tests first) would start single-test
 # units last and leave one worker alone with a long test at the end.
 FIRST = ("tests/test_notebooks.py::", "tests/test_fit.py::test_fitting_notebook_executes",
-         "tests/test_stability.py:")
+         "tests/test_stability.py:", "tests/test_ibl.py::test_stiff_inputs_finite_and_bounded[")
 
 
 def _rank(nodeid: str) -> int:

@@ -104,9 +104,9 @@ def test_half_vector_reweighting_matches_the_sphere_rule(which):
 def test_ggx_film_envmap_is_the_exhaustive_reference(points, small_map):
     """GGX + film (cross bands R_jk, SPEC §9) through `material_envmap_radiance` equals the
     exhaustive texel rule of `envmap_radiance`'s reference (same nodes, same R_jk table) on a
-    random 16 × 32 map, a grazing view included: measured 8e-17 against values ~0.1; bound
-    1e-12. The diagonal approximation (cross_band=False) differs by ≥ 1e-3 here, so the
-    bound sees the cross bands."""
+    random 16 × 32 map, a grazing view included: measured 5.6e-17 against values up to 0.19;
+    bound 1e-12. The diagonal approximation (cross_band=False) differs by 2.6e-2 here
+    (asserted > 1e-3), so the bound sees the cross bands."""
     n, v = points
     mat = _film_material(0.3)
     k = len(n)
@@ -142,10 +142,25 @@ def test_white_map_is_the_uniform_light():
 def test_mc_within_four_standard_errors(points, small_map):
     """Cook–Torrance (Beckmann + V-cavity + Schlick) over Lambert: cosine-weighted MC
     (2¹⁶ samples, fixed key) against the texel reference, every band of 6 points within
-    4 standard errors (measured |z| ≤ 2.3)."""
+    4 standard errors (measured |z| ≤ 2.03)."""
     n, v = points
     ct = _cook_torrance()
     ref = np.asarray(material_envmap_radiance(ct, n, v, small_map))
     mc, se = material_envmap_radiance(ct, n, v, small_map, method="mc", return_stderr=True)
     z = (np.asarray(mc) - ref) / np.asarray(se)
     assert np.all(np.asarray(se) > 0) and np.all(np.abs(z) < 4), z
+
+
+def test_gradient_through_the_material_is_finite_differences():
+    """∂L/∂d of a GGX + film + Lambert patch (jax.grad through the `Material` pytree) against
+    a central difference, step 1e-3 nm: measured relative difference 1e-9; bound 1e-6."""
+    import jax
+
+    def total(d):
+        mat = tf.Material(tf.ggx_lobe(0.3), tf.film_fresnel(tf.Film(d, 1.3, 2.0, 0.5)),
+                          tf.lambert_diffuse(0.1))
+        return jnp.sum(material_patch_radiance(mat, jnp.array([0.3, 1.0])))
+
+    g = float(jax.grad(total)(600.0))
+    fd = float((total(600.001) - total(599.999)) / 0.002)
+    assert np.isfinite(g) and abs(g - fd) <= 1e-6 * abs(fd), (g, fd)

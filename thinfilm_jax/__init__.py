@@ -66,6 +66,8 @@ from .optics.opd import taylor_opd_moments as taylor_opd_moments
 from .shading.patch import METHODS as PATCH_METHODS
 from .shading.patch import patch_radiance as patch_radiance
 from .shading.patch import patch_radiance_mc as patch_radiance_mc
+from .shading.material_patch import material_patch_radiance as material_patch_radiance
+from .shading.material_ibl import material_envmap_radiance as material_envmap_radiance
 from .shading.prefilter import PrefilteredEnvMap as PrefilteredEnvMap
 from .shading.prefilter import prefilter_envmap as prefilter_envmap
 from .spectral.khr import khr_reflectance as khr_reflectance

@@ -47,6 +47,10 @@ def _bench(args) -> int:
         from ..studies.improved_study import StudyConfig, run
 
         run(StudyConfig.quick() if args.quick else StudyConfig(), out=args.out)
+    if args.suite in ("models", "all"):
+        from ..studies.models_bench import run_models_bench
+
+        run_models_bench(out=args.out, quick=args.quick)
     return 0
 
 
@@ -118,13 +122,15 @@ def build_parser() -> argparse.ArgumentParser:
                                    "run time) and measure its error; print a table, write JSON.")
     b.add_argument("--out", default="figures", help="output folder (default: figures)")
     b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
-    b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "all"],
+    b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "models", "all"],
                    default="core",
                    help="core: error vs run time, peers, specialisation (default); ibl: the "
                         "2560×1440 IBL frame and the real-time options' errors; scaling: the "
                         "large jobs on 1, 2 and 4 devices (subprocesses); improved: "
                         "method='improved' against filtered (regions, IBL renders, "
-                        "kernel cost, Pareto); all: the four")
+                        "kernel cost, Pareto); models: the classic lobes with a thin film, "
+                        "Schlick tint and the film methods against the exact film "
+                        "(figures/models.*); all: the five")
     b.set_defaults(func=_bench)
 
     from ..shading.envmap import SHIPPED

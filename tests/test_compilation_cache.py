@@ -31,3 +31,37 @@ def test_cache_written_to_the_configured_folder_and_opt_out(tmp_path):
     off = tmp_path / "off"
     out = _run({"THINFILM_JAX_CACHE_DIR": str(off), "THINFILM_JAX_NO_CACHE": "1"})
     assert "DIR None" in out and not off.exists()
+
+
+def test_host_tables_cached_next_to_the_compilation_cache(tmp_path):
+    """`cached_host_tables` computes once per cache folder and key: a second call reads the
+    file (bit-identical), another key or a changed source file recomputes, and with the
+    compilation cache off it only computes."""
+    import jax
+    import numpy as np
+
+    from thinfilm_jax.core.compilation_cache import cached_host_tables
+
+    calls = []
+    src = tmp_path / "src.py"
+    src.write_text("a = 1\n")
+
+    def compute(v=1.0):
+        calls.append(v)
+        return np.arange(3.0) * v, np.eye(2) * v
+
+    jax.config.update("jax_compilation_cache_dir", None)
+    try:
+        cached_host_tables("t", (1,), (src,), compute)
+        assert calls == [1.0]
+        jax.config.update("jax_compilation_cache_dir", str(tmp_path / "cache"))
+        first = cached_host_tables("t", (1,), (src,), compute)
+        again = cached_host_tables("t", (1,), (src,), compute)
+        assert calls == [1.0, 1.0]
+        assert all(np.array_equal(a, b) for a, b in zip(first, again))
+        cached_host_tables("t", (2,), (src,), lambda: compute(2.0))
+        src.write_text("a = 2\n")
+        cached_host_tables("t", (1,), (src,), compute)
+        assert calls == [1.0, 1.0, 2.0, 1.0]
+    finally:
+        jax.config.update("jax_compilation_cache_dir", os.environ["THINFILM_JAX_TEST_CACHE"])

@@ -53,3 +53,39 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path | No
         return None
     jax.config.update("jax_compilation_cache_dir", str(folder))
     return folder
+
+
+def cached_host_tables(name: str, key: tuple, sources: tuple, compute):
+    """Host tables (a tuple of NumPy arrays) computed once per cache folder: next to JAX's
+    persistent compilation cache, when that cache is on (``jax_compilation_cache_dir``, as
+    `enable_compilation_cache` sets it), else simply `compute()`.
+
+    The file name hashes `key` (the tables' arguments), the JAX version and the source text of
+    the `sources` files, so a change of either recomputes. Written atomically; a file that
+    cannot be read or written is recomputed, never an error (the cache is an optimisation).
+    """
+    import hashlib
+
+    import numpy as np
+
+    from ._io import atomic_write
+
+    folder = jax.config.jax_compilation_cache_dir
+    if not folder:
+        return compute()
+    h = hashlib.sha256(repr((key, jax.__version__)).encode())
+    for src in sources:
+        h.update(Path(src).read_bytes())
+    path = Path(folder) / "host_tables" / f"{name}-{h.hexdigest()[:24]}.npz"
+    try:
+        with np.load(path) as f:
+            return tuple(f[f"a{i}"] for i in range(len(f.files)))
+    except (OSError, ValueError, KeyError):
+        pass
+    out = tuple(np.asarray(x) for x in compute())
+    try:
+        atomic_write(path, lambda tmp: np.savez(tmp, **{f"a{i}": x for i, x in enumerate(out)}),
+                     suffix=".npz")
+    except OSError:
+        pass
+    return out

@@ -102,6 +102,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from ..core.compilation_cache import cached_host_tables
 from ..core.film import Film
 from .filtered import filtered_bands
 from ..optics.fresnel import safe_div, safe_sqrt
@@ -186,13 +187,13 @@ def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
     sqa = np.linspace(0.0, 1.0, n_a)
     theta = np.arccos(u**2)
     t, a = np.meshgrid(theta, np.maximum(sqa**2, ALPHA_FLOOR), indexing="ij")
-    fn = jax.jit(jax.vmap(functools.partial(_bin_stats, bins=bins, quadrature=quadrature,
-                                            ndf=ndf)))
+    row = jax.vmap(functools.partial(_bin_stats, bins=bins, quadrature=quadrature, ndf=ndf))
+    # one compiled call for the whole table, a row of nodes per step (one dispatch and one
+    # copy to the host, where a Python loop over rows paid both per row)
+    fn = jax.jit(lambda t, a: jax.lax.map(lambda ta: row(*ta), (t, a)))
     dt = jnp.result_type(float)  # float64 when enabled
-    rows = [jax.tree.map(lambda x: np.asarray(x, np.float64),
-                         fn(jnp.asarray(t[i], dt), jnp.asarray(a[i], dt))) for i in range(n_u)]
-    stats = np.stack([r[0] for r in rows])  # (n_u, n_a, 2, K)
-    lobe = np.stack([r[1] for r in rows])  # (n_u, n_a, 2, K + 1): sin β_k, tr Σ_k
+    stats, lobe = (np.array(x, np.float64) for x in fn(jnp.asarray(t, dt), jnp.asarray(a, dt)))
+    # stats (n_u, n_a, 2, K); lobe (n_u, n_a, 2, K + 1): sin β_k, tr Σ_k
     # h_k = sin β_k / sin θ_o is even in θ_o, hence smooth in √cos θ_o (β_k is not): the
     # θ_o = 0 row is its limit, extrapolated quadratically in θ_o² from the next three rows
     # (at θ_o = 0 itself β_k = 0 exactly); the θ_o = 90° row (no lobe) reads along ω_r
@@ -223,6 +224,18 @@ def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
     return stats, lobe, ring
 
 
+@functools.cache
+def _bin_table_cached(shape, bins, quadrature, ndf, x64):
+    """`_bin_table_host` once per process, and once per cache folder when JAX's persistent
+    compilation cache is on (`core.compilation_cache.cached_host_tables`: ≈ 10 s saved in
+    every later process, e.g. each notebook kernel and CLI run)."""
+    from ..brdf import microfacet
+
+    return cached_host_tables("bin_table", (shape, bins, quadrature, ndf, x64),
+                              (__file__, microfacet.__file__),
+                              lambda: _bin_table_host(shape, bins, quadrature, ndf, x64))
+
+
 def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
               quadrature: tuple[int, int] = TABLE_QUADRATURE, ndf: str = "ggx",
               dtype=jnp.float64) -> BinTable:
@@ -236,7 +249,7 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
         ndf: "ggx" or "beckmann".
         dtype: float dtype of the table.
     Cost: n_u · n_a quadratures of n_u·n_φ nodes (≈ 10 s on a 2-core CPU for the default,
-    once per process). Computed in float64 when enabled, else in float32.
+    once per process; once per cache folder when JAX's persistent compilation cache is on). Computed in float64 when enabled, else in float32.
     """
     from ..core import _validate as V
 
@@ -247,8 +260,9 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
              V.check_int("shape[1]", shape[1], 2))
     quadrature = V.check_quadrature(quadrature)
     V.check_choice("ndf", ndf, ("ggx", "beckmann"))
+    x64 = bool(jax.config.jax_enable_x64)
     with jax.ensure_compile_time_eval():  # a host table, also when first asked for under jit
-        host = _bin_table_host(shape, bins, quadrature, ndf, bool(jax.config.jax_enable_x64))
+        host = _bin_table_cached(shape, bins, quadrature, ndf, x64)
     return BinTable(*(jnp.asarray(x, dtype) for x in host))
 
 

@@ -409,6 +409,16 @@ def _ibl_vs_ideal(name):
     return next(r for r in rows if r["name"] == name)["vs_ideal"]
 
 
+def _models_rows():
+    d = artifact("models.json")
+    st = {(r["family"], r["film"]): r for r in d["schlick_tint"]}
+    fm = {(r["grid"], r["method"]): r for r in d["film_methods"]}
+    pair = lambda r: [r["dE2000_mean"], r["dE2000_p95"]]  # noqa: E731
+    return {(film,): [pair(st[("ggx", film)]), pair(st[("cook_torrance", film)])]
+            + [pair(fm[(film, m)]) for m in ("khr", "ideal", "filtered", "improved")]
+            for (fam, film) in st if fam == "ggx"}
+
+
 def _improved_rows():
     d = artifact("improved.json")
     u = d["uniform"]
@@ -640,6 +650,7 @@ SPECS = [
              lambda: [_ibl_reference_rate(kind, a) for kind in ("adaptive", "exhaustive")
                       for a in ("0.05", "0.25", "0.6")]),
     Table("| ΔE₀₀ vs reference (mean / p95) |", ("improved.json",), 1, _improved_rows),
+    Table("| film (uniform light, θₒ 0–85°", ("models.json",), 1, _models_rows),
     Table("| map (pooled pixels) |", ("improved.json",), 1, _improved_map_rows),
     Sentence(r"per map except forest_slope \(improved ÷ filtered (\S+) / (\S+)\)",
              ("improved.json",), _improved_forest),

@@ -18,7 +18,7 @@ jax.config.update("jax_enable_x64", True)
 # reads THINFILM_JAX_CACHE_DIR), or by the two pytest-xdist workers — compiles once. The
 # folder is made by the first process (pytest itself, or xdist's controller) and inherited
 # through the environment by the workers and subprocesses; the process that made it removes
-# it. tests/test_compilation_cache.py runs its subprocesses with folders of its own.
+# it. tests/core/test_compilation_cache.py runs its subprocesses with folders of its own.
 if "THINFILM_JAX_TEST_CACHE" not in os.environ:
     _cache = tempfile.mkdtemp(prefix="thinfilm-jax-test-cache-")
     os.environ["THINFILM_JAX_TEST_CACHE"] = _cache
@@ -33,13 +33,13 @@ import pytest  # noqa: E402
 # so that a module's fixtures and the programs its tests share are built once, in one
 # worker; tests that share nothing expensive with their file get units of their own, so that
 # long tests run on both workers: each notebook runs in its own kernel, and the stiff grids of
-# tests/test_stability.py share one compiled group per dtype (`stability._patch_group`).
+# tests/studies/test_stability.py share one compiled group per dtype (`stability._patch_group`).
 # Long tests that build everything they need themselves (no module fixture, no program
 # another test of their file compiles): one unit per parametrisation. The persistent
 # compilation cache above still shares a program two units trace alike.
-ALONE = ("tests/test_ibl.py::test_stiff_inputs_finite_and_bounded[",
-         "tests/test_ibl.py::test_gradients_finite[",
-         "tests/test_sources.py::test_gradients_finite[")
+ALONE = ("tests/shading/test_ibl.py::test_stiff_inputs_finite_and_bounded[",
+         "tests/shading/test_ibl.py::test_gradients_finite[",
+         "tests/shading/test_sources.py::test_gradients_finite[")
 
 
 def _unit(nodeid: str) -> str:
@@ -57,8 +57,8 @@ def _unit(nodeid: str) -> str:
 # Units known to be long start first (notebooks ≈ 1 min each, a stiff patch grid ≈ 1 min per
 # dtype on the 2-core machine; matched anywhere in the unit): xdist's own order (most tests first) would start single-test
 # units last and leave one worker alone with a long test at the end.
-FIRST = ("tests/test_notebooks.py::", "tests/test_fit.py::test_fitting_notebook_executes",
-         "tests/test_stability.py:", "tests/test_ibl.py::test_stiff_inputs_finite_and_bounded[")
+FIRST = ("tests/test_notebooks.py::", "tests/fit/test_fit.py::test_fitting_notebook_executes",
+         "tests/studies/test_stability.py:", "tests/shading/test_ibl.py::test_stiff_inputs_finite_and_bounded[")
 
 
 def _rank(nodeid: str) -> int:

@@ -18,13 +18,13 @@ SKIP = {"thinfilm_jax.__main__"}
 NO_EXAMPLES = {
     "thinfilm_jax.core._io": "private: the atomic file writes of the drivers, no user API",
     "thinfilm_jax.cli._checks": "private: the CLI's range checks of parsed options "
-                                "(tests/test_cli_robustness.py runs them through the CLI)",
+                                "(tests/cli/test_cli_robustness.py runs them through the CLI)",
     "thinfilm_jax.studies": "a package docstring only: it defines nothing",
     "thinfilm_jax.studies._common": "private: materials and error statistics of the studies",
     "thinfilm_jax.studies._timing": "private: timing and bookkeeping of the studies",
     "thinfilm_jax.studies.bench": "the driver of `thinfilm-jax bench`: each function runs or "
                                   "reports the whole benchmark (minutes; "
-                                  "tests/test_bench_smoke.py)",
+                                  "tests/studies/test_bench_smoke.py)",
     "thinfilm_jax.studies.scaling": "the device-scaling driver: it spawns one subprocess per "
                                     "device count and times the large jobs (minutes)",
     "thinfilm_jax.studies.coverage": "a seeded study script: its functions are undocumented "

@@ -117,3 +117,9 @@ def test_no_tracker_references():
     hits = [f"{p.relative_to(ROOT)}: {m.group(0)!r}" for p in files
             for m in pattern.finditer(p.read_text("utf-8", errors="replace"))]
     assert not hits, "\n".join(hits)
+
+
+def test_tests_mirror_the_layers():
+    """Every test folder is named after a layer of the package (README "## Layout")."""
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and p.name != "__pycache__"}
+    assert folders <= set(LAYERS), sorted(folders - set(LAYERS))

@@ -1,6 +1,6 @@
 """Notebooks are executed so they never go stale (small sizes; an error fails the test), and
 what each one computes is read back and checked (``notebooks/fitting.ipynb`` runs in
-``tests/test_fit.py``).
+``tests/fit/test_fit.py``).
 
 Each notebook, when ``THINFILM_NB_OUT`` is set, writes a summary JSON of what it showed into
 that folder (its last cell); the tests assert physics on it, not snapshots.
@@ -60,7 +60,7 @@ def test_figure7_notebook(tmp_path):
 @pytest.mark.slow
 def test_error_vs_runtime_notebook(tmp_path):
     """The notebook on the committed ``figures/bench.json`` (the benchmark's own code path runs
-    in tests/test_bench_smoke.py; here the notebook must read the committed format). What it
+    in tests/studies/test_bench_smoke.py; here the notebook must read the committed format). What it
     shows obeys the physics of each path: the reference has zero error against itself; the
     Fourier truncation error falls with M (geometric: ρ^M, ρ = √(R₁₂R₂₃) < 1; committed
     p95 24 → 4.2 → 0.87 → … → 5e-4 over M = 0 … 10); the quadrature error falls with the

@@ -67,7 +67,7 @@ def test_sensitivity_and_lut():
     assert_contractions_precise(lambda a, b: tf.sensitivity_ft(a, sigma2=b), x, s2)
     lut = tf.build_shat_lut(dtype=F32)
     # the LUT read is elementwise (taps weighted on real parts, no contraction: one fused
-    # loop, tests/test_kernel_fusion.py); should one come back, it must state its precision
+    # loop, tests/realtime/test_kernel_fusion.py); should one come back, it must state its precision
     assert count_contractions(lut_mod.lookup, lut, x, jnp.sqrt(s2)) == 0
     assert_contractions_precise(lut_mod.lookup, lut, x, jnp.sqrt(s2))
 

@@ -21,7 +21,7 @@ Specular NDFs (`ndf`): "ggx", "beckmann", "ggx_aniso", "blinn_phong", "ashikhmin
 Beckmann, anisotropic GGX, and for Blinn–Phong the Beckmann Λ at Walter's α = √(2/(s + 2)), an
 approximation that is not the Λ of that D: for rough lobes it gains energy at grazing views,
 directional albedo with F = 1 of 1.40 at s = 0 and 1.014 at s = 10, θ_o = 1.5, ≤ 1 from s = 20
-on, tests/test_brdf_material.py), "v_cavity", "ashikhmin_shirley", "implicit" (any NDF).
+on, tests/brdf/test_brdf_material.py), "v_cavity", "ashikhmin_shirley", "implicit" (any NDF).
 The "ashikhmin_shirley" NDF of a `Material` is the paper's p(h) (`ndf.ashikhmin_shirley_pdf`,
 normalised on dω_h, a factor κ = √((n_u+1)(n_v+1)/((n_u+2)(n_v+2))) below the projected-area NDF `ndf.ashikhmin_shirley`), so
 that `ashikhmin_shirley_lobe` with its default masking "ashikhmin_shirley" is Ashikhmin &

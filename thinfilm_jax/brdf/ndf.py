@@ -29,7 +29,7 @@ Fresnel or masking. With the implicit masking G = ⟨n,ω_i⟩⟨n,ω_o⟩ the m
 D G/(4⟨n,ω_i⟩⟨n,ω_o⟩) of the Blinn–Phong D above is D/4 = (s + 2)/(8π) cosˢθ_h: the same lobe
 shape with a smaller factor. The factor that makes the lobe's albedo at normal view exactly 1 is
 (s + 2)(s + 4)/(8π(2^{−s/2} + s)) (Sloan & Hoffman; checked by quadrature in
-tests/test_brdf_lobes.py), and (s + 8)/(8π) is its cheap approximation: equal at s = 0 and for
+tests/brdf/test_brdf_lobes.py), and (s + 8)/(8π) is its cheap approximation: equal at s = 0 and for
 s → ∞, and up to 7.5 % too large in between (normal-view albedo 1.0748 at s = 10), so that
 lobe is *not* energy-conserving. `blinn_phong_specular` gives it; the ratio of the two factors,
 (s + 8)/(s + 2), tends to 1 for large s.

@@ -29,7 +29,7 @@ Thickness maps travel as an `iridescenceThicknessTexture` PNG written with OpenI
 (`write_thickness_texture`: G channel, R = B = 0, linear — a gAMA 1.0 chunk —, minimum and
 maximum covering the map so that no code is wasted; 8-bit by default, 16-bit on request).
 Read back (`read_thickness_texture`) the map is reproduced to the PNG quantisation,
-|Δd| ≤ (max − min)/(2(2ᵇ − 1)) (tests/test_interop.py).
+|Δd| ≤ (max − min)/(2(2ᵇ − 1)) (tests/interop/test_interop.py).
 
 Example (the round trip is exact; JSON keeps every float64):
     >>> import json

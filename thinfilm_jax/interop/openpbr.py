@@ -23,7 +23,7 @@ the specification's ranges, and IORs below 1 (allowed by OpenPBR, outside this l
 domain, SPEC §1).
 
 Round trip: every field is exact except the thickness, whose nm → µm → nm scaling by 1000 is
-exact to 1 ulp (bit-exact for 194 of 200 random thicknesses, tests/test_interop.py).
+exact to 1 ulp (bit-exact for 194 of 200 random thicknesses, tests/interop/test_interop.py).
 
 Example:
     >>> from thinfilm_jax import Film

@@ -84,7 +84,7 @@ def sincos_turns(u: Array) -> tuple[Array, Array]:
     the quadrant m = round(4r) ∈ {−2, …, 2} and f = r − m/4 ∈ [−⅛, ⅛] (both exact for
     |u| < 2^(p−1)), x = 2πf ∈ [−π/4, π/4] with one rounding. sin x and cos x are their Taylor
     series, truncated below ½ ulp (float64 to x¹⁵ / x¹⁶), and the quadrant rotates
-    (cos, sin) by m·90°. Errors ≤ 2 ulp of 1 against NumPy for any u (tests/test_sincos.py).
+    (cos, sin) by m·90°. Errors ≤ 2 ulp of 1 against NumPy for any u (tests/optics/test_sincos.py).
     The derivative is exact calculus, d(cos, sin)/du = 2π(−sin, cos) (custom JVP).
 
     Example:

@@ -74,7 +74,7 @@ $$ P_k \leftarrow P_k + w\,\big(P(\omega_\mu, \alpha_\mathrm{eff})
 
 so the bins keep only their differences (the coupling). The prefiltered moments are not
 needed; a constant environment gives the uniform-light model up to the prefilter's
-accuracy (measured 7.2e-5, asserted 1.2e-4: tests/test_ibl.py).
+accuracy (measured 7.2e-5, asserted 1.2e-4: tests/shading/test_ibl.py).
 
 Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
 0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,

@@ -17,8 +17,8 @@ R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the 
 
 Reference accuracy and cost: `thinfilm_jax.shading.ibl_reference` (its docstring); the exhaustive
 rule (every texel with s × s nodes) stays reachable there as `exhaustive=True`, and
-tests/test_ibl_reference.py compares the two. The convergence (the SPEC's 1e-3 of the band
-maximum) is tested in tests/test_ibl.py.
+tests/shading/test_ibl_reference.py compares the two. The convergence (the SPEC's 1e-3 of the band
+maximum) is tested in tests/shading/test_ibl.py.
 
 Example (a white map is the uniform light of `patch_radiance`, since Σ_k R_jk = R_j: at normal
 view the tabulated A and the level √α = 0.5 are exact nodes, measured agreement 3e-9; a point

@@ -35,12 +35,12 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
 
 With every block refined the result is the exhaustive rule's to rounding (its nodes are
 the same); with K = 256 it is within 6e-5 of it (`refine_blocks`,
-tests/test_ibl_reference.py), at (H W / b² + K b² s²) node evaluations per point against
+tests/shading/test_ibl_reference.py), at (H W / b² + K b² s²) node evaluations per point against
 the exhaustive rule's H W s²: 18k against 131k at α = 0.25 (s = 2) and 68k against 524k at
 α = 0.05 (s = 4) on the shipped maps.
 
 The exhaustive rule (every texel with s × s nodes, the reference before this module) stays
-reachable as `reference_radiance(..., exhaustive=True)`: tests/test_ibl_reference.py
+reachable as `reference_radiance(..., exhaustive=True)`: tests/shading/test_ibl_reference.py
 compares the two and `thinfilm_jax.studies.ibl_bench` times both in one run.
 
 Points are shaded one `jax.lax.map` step at a time (a step's intermediates, H W × 9
@@ -52,7 +52,7 @@ resamples a map taller than `max_height` (default 256) with the solid-angle-exac
 f·π/H ≤ α_min/8 and H/f ≥ 128, and warns with the factor. Resampling replaces the radiance
 inside each f × f block by its solid-angle mean; the error is ∫ ρ̃⟨n,ω⟩R (c − c̄): zero
 where the lobe is linear across a block, first order in (block size / lobe width) times
-the radiance contrast inside the block otherwise (measured in tests/test_ibl_reference.py
+the radiance contrast inside the block otherwise (measured in tests/shading/test_ibl_reference.py
 on a 1k map). `max_height=None` keeps the full map.
 
 MC: GGX visible-normal sampling (Heitz 2018), weight G₂/G₁, exact spectral R_jk per sample,

@@ -23,7 +23,7 @@ fits it:
   azimuth) split into the four quadrants at 0, ±π/2, π (the Oren–Nayar kink
   max(0, cos(φ_i − φ_o)) and the mirror azimuth sit on panel ends).
 
-Convergence (tests/test_material_integrators.py; anisotropic GGX at α_x = α_y against the
+Convergence (tests/shading/test_material_integrators.py; anisotropic GGX at α_x = α_y against the
 half-vector path, film Fresnel): at the default (128, 256) the ω_i rule is within 4e-11 for
 θ_o ≤ 1.2 and 4.1e-7 at θ_o = 1.45 for α = 0.3, within 5e-7 (θ_o ≤ 1.2) and 4.6e-4 (θ_o = 1.45,
 the lobe squeezed against the horizon) for α = 0.1; (256, 512) gives 6.3e-6 there. Pass larger

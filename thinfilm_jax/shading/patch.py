@@ -15,7 +15,7 @@ $$ L_j(\theta_o, \alpha) = \int \tilde\rho(\omega_i, \omega_o)\langle n, \omega_
 
 A(θ_o, α) = Σ_n w_n is the prefiltered BRDF (exact quadrature, K 12). The quadrature
 (`microfacet.patch_quadrature`) is deterministic and film-independent; its convergence and
-the reference's accuracy are measured in tests/test_patch.py. `patch_radiance_mc` is an
+the reference's accuracy are measured in tests/shading/test_patch.py. `patch_radiance_mc` is an
 independent Monte Carlo estimator of the reference (with its standard error).
 
 Example (16 × 16 quadrature to stay quick; d = 0 has no interference: equal bands; every band

@@ -24,7 +24,7 @@ Levels are uniform in √α from 0 (the map itself, box-filtered to the output r
 mean = ω_r, covariance 0) to 1; lookups interpolate bilinearly in direction and linearly in
 √α. Each level's input is the map box-filtered (`envmap.downsample`) until its texels are
 no wider than a quarter of the lobe (≈ α radians), which bounds the cost. Errors of the
-resolution and level count against the exact reference are measured in tests/test_ibl.py
+resolution and level count against the exact reference are measured in tests/shading/test_ibl.py
 and the README.
 
 Example (a constant environment is reproduced exactly at every level, Karis' normalisation):

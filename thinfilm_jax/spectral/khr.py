@@ -29,14 +29,14 @@ RGB, before the `iridescenceFactor` mix, so that it can be measured against the 
   Gaussian g of amplitude a_g, centre μ_g (m⁻¹) and "var" v_g (m²), with p = 2π 𝒟·10⁻⁹,
   a_g √(2π v_g) cos(μ_g p + φ) exp(−v_g p²) / 1.0685·10⁻⁷ (x has two Gaussians).
 
-Constants checked rather than trusted (tests/test_khr.py::test_constants_*): the matrix is
+Constants checked rather than trusted (tests/spectral/test_khr.py::test_constants_*): the matrix is
 the XYZ→RGB matrix of the Rec. 709 primaries with the D65 white (0.95047, 1, 1.08883) to
 ≤ 5·10⁻⁸ (its printed 7 decimals); 1.0685·10⁻⁷ m is ∫ȳ dλ = 106.857 nm of CIE 1931 2°
 (colour-science's table), so xyz(0) = (1.0005, 1.0002, 1.0011): the fit's areas; the fit
 tracks the transform of the tabulated functions to ≤ 0.07 up to 𝒟 = 2 µm and decays too fast
 beyond (at 4 µm: 0.000 against −0.060 for x̄).
 
-What the formula is not (measured in tests/test_khr.py, table in its docstring): C₀ enters
+What the formula is not (measured in tests/spectral/test_khr.py, table in its docstring): C₀ enters
 every channel as is (a flat spectrum is RGB (1, 1, 1)), while the m ≥ 1 terms map the
 equal-energy-normalised XYZ without adaptation, 𝐒(0, 0) = (1.2054, 0.9483, 0.9100), so d = 0
 is neither the Schlick base nor grey: it is C₀ + 2𝐒(0)(C₁ cos φ + C₂ cos 2φ). The clamp
@@ -75,7 +75,7 @@ from ..core.film import Film
 from ..optics.fresnel import fresnel_schlick, normal_reflectance, safe_sqrt
 
 #: XYZ → linear Rec. 709 RGB as printed by the extension (row-major here; the GLSL `mat3` is
-#: column-major). Checked against the primaries and D65 in tests/test_khr.py.
+#: column-major). Checked against the primaries and D65 in tests/spectral/test_khr.py.
 XYZ_TO_REC709 = np.array([[3.2404542, -1.5371385, -0.4985314],
                           [-0.9692660, 1.8760108, 0.0415560],
                           [0.0556434, -0.2040259, 1.0572252]])

@@ -192,7 +192,7 @@ def lookup(lut: ShatLUT, mu, sigma, *, interpolation: str = "cubic") -> Array:
         sigma: standard deviation σ ≥ 0 (nm), not the variance.
         interpolation: "cubic" (Catmull–Rom in (|μ|, σ), C¹) or "linear" (bilinear, C⁰,
             4 taps instead of 16; the real-time read of `improved`, within 2e-3 of exact Ŝ
-            at the default resolution, tests/test_improved.py).
+            at the default resolution, tests/realtime/test_improved.py).
     The demodulated envelope is interpolated, the carrier e^{−2πi|μ|/λ_c} is exact; Ŝ(−μ) =
     conj Ŝ(μ); 0 beyond μ_max; σ clamped at σ_max.
     """

@@ -10,7 +10,7 @@ import it lazily. One concern per module:
 * `peers` — `airy_reflectance` against tmm, NumPy and colour-science.
 * `specialisation` — the cost saved and the error added by each static specialisation.
 * `stability`, `stiff` — every public function at stiff and extreme inputs (asserted by
-  tests/test_stability.py).
+  tests/studies/test_stability.py).
 * `fit_study` — seeded recovery study of the fits (``python -m thinfilm_jax.studies.fit_study``).
 * `_timing`, `_common` — timing, materials, error statistics shared by the above.
 """

@@ -13,9 +13,10 @@ Three measurements (`run_models_bench`; the default run writes figures/models.js
 2. *Film methods* (uniform light, `patch_radiance`, GGX): khr, ideal, filtered, improved
    against the exact reference on the same (θ_o, α) grid for every film, and on the Figure 7
    grids (d = 600 nm over θ_o × √α; α = 0.25 over θ_o × d ∈ [0, 1000] nm).
-3. *One shipped map* at low resolution (`venice_sunset` box-filtered to 32 × 64, α = 0.3,
-   16 × 32 shading points on the camera-facing hemisphere of a sphere, view +x): the film
-   methods of `envmap_radiance` (ideal, filtered, improved) and the Schlick tint
+3. *Every shipped map* at low resolution (each box-filtered to 32 × 64, α = 0.3, 16 × 32
+   shading points on the camera-facing hemisphere of a sphere, view +x): the film methods
+   of `envmap_radiance` (khr, ideal, filtered, improved; the suns are not split off) and the
+   Schlick tint
    (`material_envmap_radiance`, RGB light × tint bands per channel) against the exact film
    (`material_envmap_radiance`, cross bands R_jk = `envmap_radiance(method="reference")`).
 
@@ -67,7 +68,7 @@ FAMILY_LABELS = {"ggx": "GGX + Smith", "cook_torrance": "Cook–Torrance (Beckma
                  "blinn_phong": "Blinn–Phong + Lambert", "ashikhmin_shirley":
                  "Ashikhmin–Shirley (+ AS diffuse)"}
 FILM_METHODS = ("khr", "ideal", "filtered", "improved")
-IBL_METHODS = ("ideal", "filtered", "improved")
+IBL_METHODS = ("khr", "ideal", "filtered", "improved")
 DIFFUSE_ALBEDO = 0.05
 
 
@@ -82,7 +83,7 @@ class ModelsConfig:
     fig7_theta: int = 24
     fig7_sqrt_alpha: int = 10
     fig7_d: int = 21
-    map_name: str = "venice_sunset"
+    map_names: tuple = tuple(SHIPPED)  # every shipped map (the improved rows without sun split)
     map_height: int = 32
     sphere: tuple = (16, 32)
     ibl_alpha: float = 0.3
@@ -94,7 +95,8 @@ class ModelsConfig:
     def quick(cls) -> ModelsConfig:
         return cls(families=("ggx",), films=("fig7 600 nm",), alphas=(0.3,),
                    n_theta=4, fig7_theta=0, map_height=8, sphere=(3, 4), repeats=1,
-                   film_methods=("khr", "improved"), ibl_methods=("improved",))
+                   film_methods=("khr", "improved"), ibl_methods=("improved",),
+                   map_names=("venice_sunset",))
 
 
 def _film(name):
@@ -239,32 +241,37 @@ def sphere_points(n_polar: int, n_azimuth: int):
 
 
 def ibl_rows(cfg: ModelsConfig, log=print):
-    env = load_envmap(SHIPPED[cfg.map_name])
-    env = downsample(env, env.shape[0] // cfg.map_height)
-    pref = prefilter_envmap(env, resolution=env.shape)
-    n, v = sphere_points(*cfg.sphere)
-    a = cfg.ibl_alpha
     rows, keep = [], {}
-    for fname in cfg.films:
-        film = _film(fname)
-        exact_mat = material_for("ggx", a, M.film_fresnel(film))
-        tint_mat = material_for("ggx", a, M.schlick_fresnel(tint_f0(film)))
-        ref, c_ref, _ = _timed(lambda nn, vv: material_envmap_radiance(exact_mat, nn, vv, env),
-                               (n, v), 1, len(n))
-        keep[(fname, "reference")] = ref
-        rows.append({"film": fname, "method": "reference (material_envmap_radiance)",
-                     "dE2000_mean": 0.0, "dE2000_p95": 0.0, "dE2000_max": 0.0, "n": len(n),
-                     "warm_s_per_point": c_ref})
-        tests = {"schlick tint (material_envmap_radiance)":
-                 lambda nn, vv: material_envmap_radiance(tint_mat, nn, vv, env)}
-        for m in cfg.ibl_methods:
-            tests[m] = (lambda nn, vv, m=m: envmap_radiance(film, a, nn, vv, pref, method=m))
-        for name, fn in tests.items():
-            out, c, _ = _timed(fn, (n, v), cfg.repeats if "schlick" not in name else 1, len(n))
-            keep[(fname, name)] = out
-            rows.append({"film": fname, "method": name, **_stats(delta_e2000(out, ref)),
-                         "warm_s_per_point": c})
-            log(f"ibl {fname:18s} {name:40s} ΔE mean {rows[-1]['dE2000_mean']:.2f}")
+    for map_name in cfg.map_names:
+        env = load_envmap(SHIPPED[map_name])
+        env = downsample(env, env.shape[0] // cfg.map_height)
+        pref = prefilter_envmap(env, resolution=env.shape)
+        n, v = sphere_points(*cfg.sphere)
+        a = cfg.ibl_alpha
+        for fname in cfg.films:
+            film = _film(fname)
+            exact_mat = material_for("ggx", a, M.film_fresnel(film))
+            tint_mat = material_for("ggx", a, M.schlick_fresnel(tint_f0(film)))
+            ref, c_ref, _ = _timed(
+                lambda nn, vv: material_envmap_radiance(exact_mat, nn, vv, env), (n, v), 1,
+                len(n))
+            keep[(map_name, fname, "reference")] = ref
+            rows.append({"map": map_name, "film": fname,
+                         "method": "reference (material_envmap_radiance)", "dE2000_mean": 0.0,
+                         "dE2000_p95": 0.0, "dE2000_max": 0.0, "n": len(n),
+                         "warm_s_per_point": c_ref})
+            tests = {"schlick tint (material_envmap_radiance)":
+                     lambda nn, vv: material_envmap_radiance(tint_mat, nn, vv, env)}
+            for m in cfg.ibl_methods:
+                tests[m] = (lambda nn, vv, m=m: envmap_radiance(film, a, nn, vv, pref, method=m))
+            for name, fn in tests.items():
+                out, c, _ = _timed(fn, (n, v), cfg.repeats if "schlick" not in name else 1,
+                                   len(n))
+                keep[(map_name, fname, name)] = out
+                rows.append({"map": map_name, "film": fname, "method": name,
+                             **_stats(_de(name, out, ref)), "warm_s_per_point": c})
+                log(f"ibl {map_name:14s} {fname:18s} {name:40s} "
+                    f"ΔE mean {rows[-1]['dE2000_mean']:.2f}")
     return rows, keep, (env.shape, cfg.sphere, a)
 
 
@@ -303,13 +310,14 @@ def write_markdown(result: dict, path: Path):
                ["grid", "method", "ΔE mean", "ΔE p95", "ΔE max", "s/pt"]),
         "", f"`khr` is linear Rec. 709 (SPEC §10): its ΔE compares in CIELAB (D65) with the "
         "reference's bands converted to linear Rec. 709 (mirror → (1, 1, 1) in both).", "",
-        f"## 3. Under `{result['config']['map_name']}` at {result['ibl']['map_shape']} texels, "
-        f"{result['ibl']['sphere']} sphere points, GGX α = {result['ibl']['alpha']}", "",
-        _table(result["ibl"]["rows"], ["film", "method", "dE2000_mean", "dE2000_p95",
+        f"## 3. Under the shipped maps ({', '.join(result['config']['map_names'])}) at "
+        f"{result['ibl']['map_shape']} texels, {result['ibl']['sphere']} sphere points, GGX "
+        f"α = {result['ibl']['alpha']} (`improved` without the suns split off)", "",
+        _table(result["ibl"]["rows"], ["map", "film", "method", "dE2000_mean", "dE2000_p95",
                                        "dE2000_max", "warm_s_per_point"],
-               ["film", "method", "ΔE mean", "ΔE p95", "ΔE max", "s/pt"]),
+               ["map", "film", "method", "ΔE mean", "ΔE p95", "ΔE max", "s/pt"]),
         "", "The reference is the film's exact texel rule with cross bands R_jk (equal to "
-        "`envmap_radiance(method=\"reference\")`, tests/test_material_integrators.py); the "
+        "`envmap_radiance(method=\"reference\")`, tests/shading/test_material_integrators.py); the "
         "Schlick tint multiplies each RGB channel of the map by its tint band.", ""]
     path.write_text("\n".join(lines), encoding="utf-8")
 

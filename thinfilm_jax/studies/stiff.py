@@ -51,7 +51,7 @@ STIFF_ALPHA = (1e-4, 0.3, 1.0)
 STIFF_WAVELENGTH = (380.0, 555.0, 830.0)
 STABILITY_QUADRATURE = 8  # patch quadrature order of the stability grid (finiteness, bounds)
 F32_BELOW_HALF_PI = float(np.nextafter(np.float32(np.pi / 2), np.float32(0)))
-# rounding slack of the bounds, by dtype (R ≤ 1: see tests/test_fresnel_airy.py R_MAX_ROUNDING)
+# rounding slack of the bounds, by dtype (R ≤ 1: see tests/optics/test_fresnel_airy.py R_MAX_ROUNDING)
 BOUND_SLACK = {"float64": 1e-12, "float32": 2e-6}
 
 

@@ -31,7 +31,7 @@ from thinfilm_jax.core.sharding import batch_mesh, map_sharded, shard_batch, to_
 #: pushed it past its 180 s timeout on the shared 2-core machine.
 MAX_ULP = 1
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def _airy(film, cos_t, lam):

@@ -235,7 +235,7 @@ def test_cap_term_matches_the_exact_integral_of_what_it_replaces(cap_sweep, gamm
     sr against 3.8e-3 sr of cap; 4°: 42, 1.98e-2 sr against 1.53e-2), so its power sits
     wider than the map's; a finer cap rule (8 × 24 nodes) changes the errors by < 4e-3.
     Bounds: `CAP_ERR_MEASURED` × 1.25. The reference at s = 4 (auto for α = 0.05 on 128
-    rows) is converged: tests/test_ibl.py::test_reference_converged_by_refinement."""
+    rows) is converged: tests/shading/test_ibl.py::test_reference_converged_by_refinement."""
     _, _, src, excess = cap_sweep[gamma]
     ref, term = reference(excess), sweep_term(src)
     assert np.all(ref >= 0)
@@ -406,7 +406,7 @@ def test_map_without_sources_is_shaded_identically(sun_prefs):
 
 # ----------------------------------------------------------------------------- 5. one texel
 def test_single_bright_texel_is_brdf_times_solid_angle():
-    """The map of tests/test_ibl.py::test_single_bright_texel_is_brdf_times_solid_angle (one
+    """The map of tests/shading/test_ibl.py::test_single_bright_texel_is_brdf_times_solid_angle (one
     white texel (40, 30) of a black 128 × 256 map) is one source of that texel's Ω at its
     centre, and its cap term is the closed form ρ̃ ⟨n, ω_i⟩ Ω R_j(⟨h, ω_i⟩) (exact spectral
     R): measured rtol 1.65e-3 over 4 views × α ∈ {0.2, 0.5} (1.39e-3 of it is the Fourier

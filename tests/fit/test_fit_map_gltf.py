@@ -2,7 +2,7 @@
 `KHR_materials_iridescence` and its `iridescenceThicknessTexture` (SPEC §10,
 `thinfilm_jax.interop.gltf`).
 
-The image, model and command line are those of tests/test_fit_map.py::test_cli_fit_map (an
+The image, model and command line are those of tests/fit/test_fit_map.py::test_cli_fit_map (an
 8×8 soap wedge, grid 101, filtered), so a full run shares their compiled functions. The PNG is
 read back with OpenImageIO (`read_thickness_texture`), independently of the writer's codes,
 and compared with the fitted ``thickness_map.npy`` to the PNG quantisation
@@ -26,7 +26,7 @@ ALPHA = 0.2
 
 @pytest.fixture(scope="module")
 def wedge_files(tmp_path_factory):
-    """The soap wedge of tests/test_fit_map.py (200–500 nm, θ_o 10°–50°) on disk."""
+    """The soap wedge of tests/fit/test_fit_map.py (200–500 nm, θ_o 10°–50°) on disk."""
     yy, xx = np.mgrid[0:H, 0:W]
     d = 200.0 + 300.0 * (xx + 0.5 * yy) / (W - 1 + 0.5 * (H - 1))
     theta = np.deg2rad(10.0 + 40.0 * yy / (H - 1))

@@ -108,7 +108,7 @@ def test_constant_environment_reproduces_patch(alpha, constant):
     This checks that each real-time path reads the map consistently with its uniform-light
     model, not that the model is accurate (a wrong film model is wrong in both): the pins
     of `improved` against the reference are `test_improved_pinned_under_an_environment` and
-    tests/test_improved.py::test_pinned_accuracy_under_uniform_light."""
+    tests/realtime/test_improved.py::test_pinned_accuracy_under_uniform_light."""
     theta = np.array([0.0, 0.6, 1.1, 1.4])
     v = view_at(theta, phi=0.3)
     for method, env, tol in (("reference", constant[0], 3e-5), ("ideal", constant[1], 1.6e-4),

@@ -384,7 +384,7 @@ def test_fitting_notebook_executes():
     """notebooks/fitting.ipynb runs end to end (small size via THINFILM_FIT_NOTEBOOK_SMALL)."""
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
-    path = Path(__file__).resolve().parents[1] / "notebooks" / "fitting.ipynb"
+    path = Path(__file__).resolve().parents[2] / "notebooks" / "fitting.ipynb"
     nb = nbformat.read(path, as_version=4)
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), \
         "commit the notebook with outputs stripped"

@@ -5,7 +5,7 @@ Physics checks: the bins reproduce the lobe's moments of cos θ₁ (law of total
 collapse to `ideal` as α → 0, converge to the reference as the number of bins grows (each
 K pinned at its measured error), the model's ΔE₀₀ against the patch reference is pinned at
 what it achieves (`test_pinned_accuracy_under_uniform_light`; under an environment:
-tests/test_ibl.py::test_improved_pinned_under_an_environment), the
+tests/shading/test_ibl.py::test_improved_pinned_under_an_environment), the
 bilinear Ŝ read stays within its stated error of the exact quadrature, a constant
 environment reproduces the uniform-light patch, and values and gradients stay finite in
 float32 and float64 down to the edges of the domain. Tables here are small (16 × 9 nodes,

@@ -37,14 +37,13 @@ Example:
 
 from __future__ import annotations
 
-import math
-import numbers
 from collections.abc import Mapping
 
 import numpy as np
 
 from ..core import _validate as V
 from ..core.film import Film
+from .gltf import _number  # a finite JSON number in range: one check for both formats
 
 SPEC_VERSION = "1.1.1"
 #: Defaults of the parameters read here (OpenPBR v1.1.1 parameter tables / .mtlx nodedef).
@@ -66,18 +65,6 @@ PARAMETERS = (
     "geometry_coat_normal", "geometry_tangent", "geometry_coat_tangent")
 #: µm → nm
 NM_PER_UM = 1000.0
-
-
-def _number(name: str, value, lo=None, hi=None) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    if (lo is not None and value < lo) or (hi is not None and value > hi):
-        raise ValueError(f"{name} must lie in [{lo}, {hi if hi is not None else 'inf'}], "
-                         f"got {value!r}")
-    return value
 
 
 def film_from_openpbr(params, *, eta_base=None, kappa_base=None) -> tuple[Film, float]:

@@ -180,7 +180,6 @@ def _bin_stats(theta_o, alpha, bins, quadrature, ndf):
     return stats, lobe
 
 
-@functools.cache
 def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
     n_u, n_a = shape
     u = np.linspace(0.0, 1.0, n_u)

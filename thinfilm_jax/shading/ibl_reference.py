@@ -230,10 +230,9 @@ def _per_row(r, light, cross):
 
 # ----------------------------------------------------------------------------- adaptive
 def _select(score, k: int, iterations: int = 32):
-    """Indices (k,) of texels with the largest scores, padded with len(score): those above
+    """Indices (k,) of blocks with the largest scores, padded with len(score): those above
     a threshold found by bisection on log(score) so that at most k pass (a sort-free top-k:
     XLA's TopK on the CPU sorts, several times slower than the whole coarse pass)."""
-    t = score.shape[0]
     top = jnp.max(score)
     lt = jnp.log(jnp.where(top > 0, top, 1.0))
 

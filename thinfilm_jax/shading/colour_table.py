@@ -73,7 +73,8 @@ from ..spectral.uplift import cross_band_name
 from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance_weights,
                      texel_centers, texel_solid_angles)
 from .ibl_reference import _interp, _local_frame, _lobe_cos_weight, _r_table, texel_nodes
-from .prefilter import _filter_level
+from ..realtime.improved import bin_table
+from .prefilter import _filter_level, bin_radiance
 
 __all__ = ["ColourTable", "prefilter_colour", "colour_table_radiance", "check_colour_table",
            "exact_colour_radiance", "decomposition_error", "map_fingerprint"]
@@ -383,15 +384,26 @@ def _albedo_lookup(table, cos_o):
     return table.albedo[i0] * (1 - f) + table.albedo[i0 + 1] * f
 
 
-def _brightness(table, omega_r, cos_o):
-    """(A(θ_o) (…,), P_k(ω_r) (…, 3)): the split-sum brightness of the material."""
-    return _albedo_lookup(table, cos_o), lookup_bilinear(table.brightness, omega_r)
+def _brightness(table, normal, view, omega_r, cos_o, alpha, brightness):
+    """(A(θ_o) (…,), P_k (…, 3)): the brightness of the material. `brightness` None: the
+    split sum, P_k(ω_r, α) from the table; a `PrefilteredEnvMap` of the same map: the mean of
+    the improved model's per-bin reads (`prefilter.bin_radiance`), A from the table."""
+    a = _albedo_lookup(table, cos_o)
+    if brightness is None:
+        return a, lookup_bilinear(table.brightness, omega_r)
+    bins = bin_table(dtype=cos_o.dtype)
+    return a, jnp.mean(bin_radiance(brightness, bins, normal, view, cos_o,
+                                    jnp.asarray(alpha, cos_o.dtype)), axis=-2)
 
 
-def colour_table_radiance(table: ColourTable, normal, view, *, rank: int | None = 0) -> Array:
-    """L_j (..., J) = A(θ_o) Σ_k C_jk(ω_r, θ_o) P_k(ω_r) (module docstring); 0 where
-    ⟨n, ω_o⟩ ≤ 0. `rank`: 0 = the stored decomposition, r = its first r terms, None = the
-    3D table."""
+def colour_table_radiance(table: ColourTable, normal, view, *, rank: int | None = 0,
+                          brightness=None) -> Array:
+    """L_j (..., J) = A(θ_o) Σ_k C_jk(ω_r, θ_o) P_k (module docstring); 0 where ⟨n, ω_o⟩ ≤ 0.
+
+    rank: 0 = the stored decomposition, r = its first r terms, None = the 3D table.
+    brightness: None = the split sum P_k(ω_r, α) of K&K 2022; a `PrefilteredEnvMap` of the
+        same map = the improved model's per-bin reads averaged (a brightness that follows
+        the lobe's off-specular shift and spread; docs/improved.md)."""
     normal = jnp.asarray(normal)
     view = jnp.asarray(view)
     dtype = jnp.result_type(normal, view, table.colour)
@@ -402,8 +414,9 @@ def colour_table_radiance(table: ColourTable, normal, view, *, rank: int | None 
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
     refl = 2 * co[..., None] * normal - view
-    c = table_colour(jax.tree.map(lambda x: jnp.asarray(x, dtype), table), refl, co, rank)
-    a, p = _brightness(table, refl, co)
+    table = jax.tree.map(lambda x: jnp.asarray(x, dtype), table)
+    c = table_colour(table, refl, co, rank)
+    a, p = _brightness(table, normal, view, refl, co, table.material[-1], brightness)
     if table.cross:
         out = jnp.sum(c.reshape(c.shape[:-1] + (-1, 3)) * p[..., None, :], -1)
     else:
@@ -414,11 +427,11 @@ def colour_table_radiance(table: ColourTable, normal, view, *, rank: int | None 
 # ----------------------------------------------------------------------------- the ceiling
 def exact_colour_radiance(film: Film, alpha, normal, view, envmap, table: ColourTable, *,
                           observer: str = DEFAULT_OBSERVER, subdivisions: int | None = None,
-                          n_cos: int = 512, chunk: int = 64) -> Array:
+                          n_cos: int = 512, chunk: int = 64, brightness=None) -> Array:
     """The method's ceiling: the split-sum brightness of `table` times the colour computed
     exactly at each shading point, C_jk = ∫ f_b⟨n,ω_i⟩ R_jk L_k / ∫ f_b⟨n,ω_i⟩ L_k (no table,
     no marginalisation): what the colour table would give if its colour were exact.
-    normal, view (N, 3) unit vectors → (N, J)."""
+    normal, view (N, 3) unit vectors → (N, J); `brightness` as `colour_table_radiance`."""
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
     a = float(alpha)
     f64 = jnp.result_type(float)  # float64 where enabled (the reference precision)
@@ -439,6 +452,6 @@ def exact_colour_radiance(film: Film, alpha, normal, view, envmap, table: Colour
     c = _ratio(num, den, num1, den1, True)
     co = jnp.where(up, cos_o, 1.0)
     refl = 2 * co[:, None] * normal - view
-    aa, p = _brightness(table, refl, co)
+    aa, p = _brightness(table, normal, view, refl, co, a, brightness)
     out = jnp.sum(c.reshape(-1, get_observer(observer).n_bands, 3) * p[:, None, :], -1)
     return jnp.where(up[:, None], aa[:, None] * out, 0.0)

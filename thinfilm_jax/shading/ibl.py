@@ -56,13 +56,12 @@ from ..core.film import Film
 from .ibl_reference import (_interp, _lobe_cos_weight, _r_table,  # noqa: F401 (re-exported)
                             auto_subdivisions, exact_radiance, texel_nodes)
 from ..optics.fresnel import safe_sqrt
-from ..realtime.improved import (BinTable, _bilinear, bin_table, improved_bins, lookup_bins,
-                       lookup_lobe)
+from ..realtime.improved import BinTable, bin_table, improved_bins, lookup_bins
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..spectral.khr import khr_bands
 from ..spectral.lut import build_shat_lut
 from ..realtime.options import ModelOptions, check_options
-from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered, lookup_radiance,
+from .prefilter import (PrefilteredEnvMap, bin_radiance, lookup_albedo, lookup_prefiltered,
                         moments_to_mean_cov, prefilter_envmap)
 from .sources import source_radiance
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
@@ -323,13 +322,7 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
     a = lookup_albedo(pref, co, safe_sqrt(alpha))
-    dirn, sqa_eff = lookup_lobe(table, normal, view, co, alpha)  # (..., K + 1, 3), (..., K + 1)
-    rad = lookup_radiance(pref, dirn, sqa_eff)  # (..., K + 1, 3)
-    # the bins' reads carry the light–film coupling; where the bins are rings round ω_o
-    # (near normal view) their mean is moved to the whole lobe's read (module docstring)
-    w = _bilinear(table.ring, safe_sqrt(co), safe_sqrt(alpha))[..., None, None]
-    rad = rad[..., :-1, :] + w * (rad[..., -1:, :] - jnp.mean(rad[..., :-1, :], axis=-2,
-                                                             keepdims=True))
+    rad = bin_radiance(pref, table, normal, view, co, alpha)  # (..., K, 3)
     cb, sb = lookup_bins(table, co, alpha)
     obs = cross_band_name(observer) if cross_band else observer
     r = improved_bins(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,

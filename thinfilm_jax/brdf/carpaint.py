@@ -137,8 +137,11 @@ class CarPaint(NamedTuple):
 
 # ----------------------------------------------------------------------------- checks
 def _leaf_dtype(*xs):
-    dt = jnp.result_type(*xs)
-    return dt if jnp.issubdtype(dt, jnp.floating) else jnp.result_type(float)
+    """The widest floating dtype among the array arguments (Python numbers and integer arrays
+    adapt; none: the default float), promoted outside JAX's strict mode."""
+    dts = [np.dtype(x.dtype) for x in xs if hasattr(x, "dtype")]
+    dts = [d for d in dts if np.issubdtype(d, np.floating)]
+    return np.result_type(*dts) if dts else jnp.result_type(float)
 
 
 def check_paint(paint) -> CarPaint:

@@ -64,11 +64,13 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from ..brdf.carpaint import (CarPaint, check_paint, coat_reflectance, lobe_albedo,
+                             paint_brightness, paint_colour)
 from ..brdf.microfacet import albedo
 from ..core import _validate as V
 from ..core.film import Film
 from ..optics.airy import choose_arithmetic
-from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
+from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 from ..spectral.uplift import cross_band_name
 from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance_weights,
                      texel_centers, texel_solid_angles)
@@ -92,13 +94,18 @@ class ColourTable:
     """The K&K 2022 tables of one material under one map (a pytree; arrays are leaves).
 
     colour: (h, w, r, C) the ω_r factors (equirect, texel centres), C channels
-        (J·K = 9 cross bands R_jk of a film; J for a diagonal colour).
+        (J·K = 9 cross bands R_jk of a film; J = 3 for a paint's diagonal colour χ_j).
     view: (n_view, r, C) the θ_o factors at u = √cos θ_o = (i + 1)/n_view.
     full: (h, w, n_view, C) the 3D table C(ω_r, θ_o) before the decomposition.
-    brightness: (hb, wb, 3) P_k(ω_r, α): the map prefiltered at the material's α.
-    albedo: (N_ALBEDO,) A(θ_o, α) on a uniform grid of √cos θ_o.
-    Static: `material` (fingerprint of the concrete material the table was built for),
-    `envmap` (fingerprint of the map), `observer`, `cross` (C = J·K), `build_seconds`.
+    brightness: (B, hb, wb, 3) the brightness terms' prefiltered maps: per GGX lobe the map
+        prefiltered at its width (read at ω_r), a paint's Lambert term the cosine-filtered
+        map (read at n), a paint's coat the box-filtered map (read at ω_r).
+    albedo: (N_ALBEDO, B) each term's directional albedo on a uniform grid of √cos θ_o
+        (A(θ_o, α) of GGX; a paint's `carpaint.lobe_albedo` and `coat_reflectance`).
+    Static: `terms` (B names: "specular", "diffuse", "coat"; the coat is not coloured),
+    `alphas` (the GGX α of each term, 0 elsewhere), `material` (fingerprint of the concrete
+    material the table was built for), `envmap` (fingerprint of the map), `observer`,
+    `cross` (C = J·K), `build_seconds`.
     """
 
     colour: Array
@@ -106,6 +113,8 @@ class ColourTable:
     full: Array
     brightness: Array
     albedo: Array
+    terms: tuple = ("specular",)
+    alphas: tuple = ()
     material: tuple = ()
     envmap: str = ""
     observer: str = DEFAULT_OBSERVER
@@ -126,7 +135,8 @@ class ColourTable:
 
 
 ColourTable = _dataclass(ColourTable, ["colour", "view", "full", "brightness", "albedo"],
-                         ["material", "envmap", "observer", "cross", "build_seconds"])
+                         ["terms", "alphas", "material", "envmap", "observer", "cross",
+                          "build_seconds"])
 
 
 # ----------------------------------------------------------------------------- fingerprints
@@ -145,9 +155,18 @@ def _film_fingerprint(film: Film, alpha) -> tuple:
     return ("film",) + tuple(float(v.reshape(())) for v in vals)
 
 
+def _paint_fingerprint(paint: CarPaint) -> tuple:
+    h = hashlib.sha1()
+    for x in paint:
+        a = np.ascontiguousarray(np.asarray(x, np.float64))
+        h.update(a.tobytes() + str(a.shape).encode())
+    return ("paint", h.hexdigest()[:16])
+
+
 def check_colour_table(table, film: Film | None = None, alpha=None, envmap=None) -> None:
-    """Raise a `ValueError` if `table` is not a `ColourTable` built for this film, α and map
-    (concrete inputs only; traced ones are not checked), or if its arrays hold NaN/inf."""
+    """Raise a `ValueError` if `table` is not a `ColourTable` built for this film and α (or
+    this `CarPaint` passed as `film`) and this map (concrete inputs only; traced ones are not
+    checked), or if its arrays hold NaN/inf."""
     if not isinstance(table, ColourTable):
         raise ValueError(f"method='colour_table' reads a ColourTable (prefilter_colour), got "
                          f"{type(table).__name__}")
@@ -155,7 +174,13 @@ def check_colour_table(table, film: Film | None = None, alpha=None, envmap=None)
         a = getattr(table, name)
         if V.is_concrete(a) and not np.all(np.isfinite(np.asarray(a))):
             raise ValueError(f"ColourTable.{name} holds NaN or inf")
-    if film is not None:
+    if isinstance(film, CarPaint):
+        if table.material[:1] != ("paint",):
+            raise ValueError("the ColourTable was built for a film, not a car paint")
+        if (all(V.is_concrete(x) for x in film)
+                and _paint_fingerprint(film) != table.material):
+            raise ValueError("the ColourTable was built for another material (car paint)")
+    elif film is not None:
         leaves = (*film, alpha)
         if all(V.is_concrete(x) for x in leaves) and table.material[:1] == ("film",):
             want = np.asarray(table.material[1:], np.float64)
@@ -194,22 +219,38 @@ def configurations(omega_r, cos_o, n_azimuth: int):
 
 
 # ----------------------------------------------------------------------------- the 3D table
-@functools.partial(jax.jit, static_argnames=("chunk",))
-def _film_sums(normal, view, alpha, dirs, weight, light, r_table, chunk):
-    """Σ_nodes f_b⟨n,ω_i⟩ w L_k (M, 3) and Σ f_b⟨n,ω_i⟩ w R_jk(c) L_k (M, J·K) per
-    configuration, `chunk` configurations at a time."""
+def _film_point(material, n, wo, dirs):
+    """Film on GGX: f_b⟨n,ω_i⟩ = ρ̃⟨n,ω_i⟩ (chunk, N), colour R_jk(⟨h,ω_i⟩) (chunk, N, J, K)."""
+    alpha, r_table = material
+    f, c = _lobe_cos_weight(dirs, n, wo, alpha)
+    r = _interp(r_table, c)
+    return f, r.reshape(r.shape[:-1] + (-1, 3))
+
+
+def _paint_point(paint, n, wo, dirs):
+    """Car paint: f_b⟨n,ω_i⟩ (the brightness through the coat, `carpaint.paint_brightness`)
+    and the colour χ_j (`carpaint.paint_colour`) (chunk, N, J): diagonal in the channels."""
+    ci = jnp.clip(jnp.sum(dirs * n, -1), 0.0, 1.0)
+    return paint_brightness(paint, dirs, wo, n) * ci, paint_colour(paint, dirs, wo, n)
+
+
+@functools.partial(jax.jit, static_argnames=("point", "chunk"))
+def _config_sums(point, material, normal, view, dirs, weight, light, chunk):
+    """Per configuration (n, ω_o): Σ_nodes f_b⟨n,ω_i⟩ w L_k (M, 3) and Σ f_b⟨n,ω_i⟩ w χ L
+    (M, C) (C = J·K for a cross colour χ_jk, J for a diagonal χ_j), `chunk` at a time."""
     m = normal.shape[0]
     pad = -m % chunk
     nv = jnp.pad(jnp.stack([normal, view], 1), ((0, pad), (0, 0), (0, 0)), mode="edge")
 
     def one(cfg):  # cfg (chunk, 2, 3)
-        f, c = _lobe_cos_weight(dirs[None], cfg[:, 0, None], cfg[:, 1, None], alpha)
+        f, col = point(material, cfg[:, 0, None], cfg[:, 1, None], dirs[None])
         fw = f * weight[None]  # (chunk, N)
         den = jnp.matmul(fw, light, precision=HIGHEST)  # (chunk, 3)
-        r = _interp(r_table, c)  # (chunk, N, J·K)
-        kk = light.shape[-1]
-        rk = r.reshape(r.shape[:-1] + (-1, kk)) * light[None, :, None, :]
-        num = jnp.einsum("mn,mnjk->mjk", fw, rk, precision=HIGHEST)
+        if col.ndim == 4:  # cross: χ_jk L_k
+            num = jnp.einsum("mn,mnjk->mjk", fw, col * light[None, :, None, :],
+                             precision=HIGHEST)
+        else:
+            num = jnp.einsum("mn,mnj->mj", fw, col * light[None], precision=HIGHEST)
         return den, num.reshape(num.shape[0], -1)
 
     den, num = jax.lax.map(one, nv.reshape(-1, chunk, 2, 3))
@@ -269,28 +310,47 @@ def prefilter_colour(envmap, material, alpha=None, *, observer: str = DEFAULT_OB
 
     Args:
         envmap: `EnvMap`, path, shipped name or (H, W, 3) array.
-        material: a `Film` (scalar fields) with its GGX `alpha` ∈ (0, 1].
-        alpha: the film's GGX roughness (required for a `Film`).
-        observer: colour bands J (the table holds the cross bands R_jk, J·3 channels).
+        material: a `Film` (scalar fields) with its GGX `alpha`, or a `carpaint.CarPaint`
+            (its brightness: the GGX lobes, the Lambert term and the coat's mirror; its
+            colour χ_j(θ_h, θ_d) per channel).
+        alpha: the film's GGX roughness α ∈ (0, 1] (required for a `Film`; None for a paint).
+        observer: colour bands J of a film (the table holds the cross bands R_jk, J·3
+            channels); a paint's colour table is in the default bands already.
         resolution: (h, w = 2h) of the ω_r factor (K&K 2022: a low-resolution cubemap).
         n_view: nodes of u = √cos θ_o (the θ_o factor), `view_nodes`.
         n_azimuth: ψ nodes of the marginalisation.
         rank: terms of the decomposition (1: K&K 2022's separable form; None: all).
-        subdivisions: s × s nodes per texel (None: ⌈2 (π/H)/α⌉ in [1, 4]).
-        n_cos: nodes of the exact R_jk(c) table.
-        brightness_resolution: (h, w) of the prefiltered brightness P(ω_r, α).
-        chunk: configurations integrated together (memory ≈ chunk × nodes × 9 floats).
-        dtype: of the stored tables (default float64; the build runs in float64).
+        subdivisions: s × s nodes per texel (None: ⌈2 (π/H)/α⌉ in [1, 4], α the narrowest).
+        n_cos: nodes of a film's exact R_jk(c) table.
+        brightness_resolution: (h, w) of the prefiltered brightness maps.
+        chunk: configurations integrated together (memory ≈ chunk × nodes × C floats).
+        dtype: of the stored tables (default: float64 where enabled; the build runs in it).
+    Raises:
+        ValueError: a non-scalar film, a bad α, a `Film` without α or a paint with one,
+            resolutions that are not (h, 2h), counts below their minimum.
     """
     V.check_choice("observer", observer, OBSERVERS)
-    if not isinstance(material, Film):
-        raise ValueError(f"prefilter_colour takes a Film (with alpha) here, got "
+    paint = isinstance(material, CarPaint)
+    if paint:
+        check_paint(material)
+        if alpha is not None:
+            raise ValueError("a CarPaint carries its own lobe widths: pass alpha=None")
+        if observer != DEFAULT_OBSERVER:
+            raise ValueError("a CarPaint's colour table is in the default bands: leave "
+                             "observer at its default")
+        key = _paint_fingerprint(material)
+        alphas = [float(x) for x in np.asarray(material.lobe_alpha, np.float64)]
+        a_min = min(alphas)
+    elif isinstance(material, Film):
+        if alpha is None:
+            raise ValueError("alpha is required with a Film (the GGX roughness of the table)")
+        V.check_film(material)
+        V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+        key = _film_fingerprint(material, alpha)
+        a_min = float(alpha)
+    else:
+        raise ValueError(f"prefilter_colour takes a Film (with alpha) or a CarPaint, got "
                          f"{type(material).__name__}")
-    if alpha is None:
-        raise ValueError("alpha is required with a Film (the GGX roughness of the table)")
-    V.check_film(material)
-    V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-    key = _film_fingerprint(material, alpha)
     h, w = resolution
     hb, wb = brightness_resolution
     for name, (a, b) in (("resolution", resolution),
@@ -303,52 +363,87 @@ def prefilter_colour(envmap, material, alpha=None, *, observer: str = DEFAULT_OB
     if rank is not None:
         V.check_int("rank", rank, 1)
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
+    if env.shape[0] % hb or env.shape[1] % wb:
+        raise ValueError(f"brightness_resolution {brightness_resolution} must divide the "
+                         f"map's {env.shape}")
     start = time.perf_counter()
-    a = float(alpha)
     f64 = jnp.result_type(float)  # float64 where enabled (the reference precision)
-    src, sh, sw, s = _source_map(env, a, subdivisions)
+    src, sh, sw, s = _source_map(env, a_min, subdivisions)
     d, wgt, idx = texel_nodes(sh, sw, s)
-    rad = np.asarray(src.radiance, np.float64).reshape(-1, 3)
-    dirs, weight = jnp.asarray(d, f64), jnp.asarray(wgt, f64)
-    light = jnp.asarray(rad[idx], f64)
-    film = Film(*(jnp.asarray(x, f64) for x in key[1:6]))
-    arithmetic = choose_arithmetic(film, "auto")
-    r_tab = _r_table(film, cross_band_name(observer), n_cos, arithmetic, f64)
+    light = jnp.asarray(np.asarray(src.radiance, np.float64).reshape(-1, 3)[idx], f64)
+    if paint:
+        point, mat = _paint_point, CarPaint(*(jnp.asarray(x, f64) for x in material))
+    else:
+        film = Film(*(jnp.asarray(x, f64) for x in key[1:6]))
+        r_tab = _r_table(film, cross_band_name(observer), n_cos,
+                         choose_arithmetic(film, "auto"), f64)
+        point, mat = _film_point, (jnp.asarray(a_min, f64), r_tab)
     omega_r = jnp.asarray(texel_centers(h, w).reshape(-1, 3), f64)
     u = view_nodes(n_view)
     n, wo = configurations(omega_r, u * u, n_azimuth)
     flat = lambda x: x.reshape(-1, 3)  # noqa: E731
-    sums = [_film_sums(flat(n), flat(wo), jnp.asarray(a, f64), dirs, weight, lt, r_tab, chunk)
+    sums = [_config_sums(point, mat, flat(n), flat(wo), jnp.asarray(d, f64),
+                         jnp.asarray(wgt, f64), lt, chunk)
             for lt in (light, jnp.ones_like(light))]
     shape = (h, w, n_view, n_azimuth)
     (den, num), (den1, num1) = [tuple(x.reshape(shape + x.shape[-1:]).sum(3) for x in p)
                                 for p in sums]
-    full = np.asarray(_ratio(num, den, num1, den1, True))
+    full = np.asarray(_ratio(num, den, num1, den1, not paint))
     us, vs = decompose(full, rank)
-    # the brightness: P(ω_r, α) at exactly α, and A(θ_o, α)
-    bsrc = env
-    while (bsrc.shape[0] // 2 >= hb and bsrc.shape[0] % 2 == 0
-           and np.pi / (bsrc.shape[0] // 2) <= a / 4):
-        bsrc = downsample(bsrc, 2)
-    bh, bw = bsrc.shape
-    if bh % hb or bw % wb:
-        raise ValueError(f"brightness_resolution {brightness_resolution} must divide the "
-                         f"map's {env.shape}")
-    p, _ = _filter_level(jnp.asarray(a, f64),
-                         jnp.asarray(np.asarray(bsrc.radiance), f64).reshape(-1, 3),
-                         jnp.asarray(texel_centers(bh, bw).reshape(-1, 3), f64),
-                         jnp.asarray(texel_solid_angles(bh, bw).reshape(-1), f64),
-                         jnp.asarray(texel_centers(hb, wb), f64),
-                         jnp.asarray(luminance_weights(), f64), False)
     ua = np.linspace(0.0, 1.0, N_ALBEDO)
-    alb = np.asarray(albedo(np.arccos(ua**2), a))
+    if paint:
+        terms, levels = _paint_brightness(material, env, hb, wb, f64, alphas)
+        alb = np.concatenate([np.asarray(lobe_albedo(mat, ua**2)),
+                              np.asarray(coat_reflectance(mat, ua**2))[:, None]], -1)
+    else:
+        terms, levels = ("specular",), [_ggx_level(env, a_min, hb, wb, f64)]
+        alb = np.asarray(albedo(np.arccos(ua**2), a_min))[:, None]
+        alphas = [a_min]
     dt = dtype or f64
     out = ColourTable(jnp.asarray(us, dt), jnp.asarray(vs, dt), jnp.asarray(full, dt),
-                      jnp.asarray(p, dt), jnp.asarray(alb, dt), material=key,
-                      envmap=map_fingerprint(env), observer=observer, cross=True,
-                      build_seconds=0.0)
+                      jnp.asarray(np.stack([np.asarray(x) for x in levels]), dt),
+                      jnp.asarray(alb, dt), terms=terms,
+                      alphas=tuple(alphas) + (0.0,) * (len(terms) - len(alphas)),
+                      material=key, envmap=map_fingerprint(env), observer=observer,
+                      cross=not paint)
     jax.block_until_ready(out.full)
     return dataclasses.replace(out, build_seconds=round(time.perf_counter() - start, 3))
+
+
+def _ggx_level(env: EnvMap, alpha: float, hb: int, wb: int, dt):
+    """P(ω_r, α) (hb, wb, 3): the map prefiltered at exactly α (`prefilter._filter_level`),
+    its input box-filtered while the texels stay ≤ α/4."""
+    src = env
+    while (src.shape[0] // 2 >= hb and src.shape[0] % 2 == 0
+           and np.pi / (src.shape[0] // 2) <= alpha / 4):
+        src = downsample(src, 2)
+    bh, bw = src.shape
+    p, _ = _filter_level(jnp.asarray(alpha, dt),
+                         jnp.asarray(np.asarray(src.radiance), dt).reshape(-1, 3),
+                         jnp.asarray(texel_centers(bh, bw).reshape(-1, 3), dt),
+                         jnp.asarray(texel_solid_angles(bh, bw).reshape(-1), dt),
+                         jnp.asarray(texel_centers(hb, wb), dt),
+                         jnp.asarray(luminance_weights(), dt), False)
+    return p
+
+
+def _paint_brightness(paint: CarPaint, env: EnvMap, hb: int, wb: int, dt, alphas):
+    """A paint's brightness terms: each GGX lobe prefiltered at its width outside the coat
+    (min(1, η_c α_l): refraction widens a lobe by η_c near normal view, dθ = η_c dθ'), the
+    Lambert term's cosine-filtered map E(n)/π, the coat's mirror (the map box-filtered)."""
+    eta = float(np.asarray(paint.coat_ior))
+    levels = [_ggx_level(env, min(1.0, eta * a), hb, wb, dt) for a in alphas]
+    src = downsample(env, max(1, env.shape[0] // max(hb, 32)))
+    bh, bw = src.shape
+    dirs = jnp.asarray(texel_centers(bh, bw).reshape(-1, 3), dt)
+    om = jnp.asarray(texel_solid_angles(bh, bw).reshape(-1), dt)
+    rad = jnp.asarray(np.asarray(src.radiance), dt).reshape(-1, 3)
+    out_dirs = jnp.asarray(texel_centers(hb, wb).reshape(-1, 3), dt)
+    cos = jnp.clip(jnp.matmul(out_dirs, dirs.T, precision=HIGHEST), 0.0, None)
+    levels.append(jnp.matmul(cos * om[None], rad, precision=HIGHEST).reshape(hb, wb, 3)
+                  / np.pi)
+    levels.append(downsample(env, env.shape[0] // hb).radiance)
+    return ("specular",) * len(alphas) + ("diffuse", "coat"), levels
 
 
 # ----------------------------------------------------------------------------- shading
@@ -376,82 +471,106 @@ def table_colour(table: ColourTable, omega_r, cos_o, rank: int | None = 0):
 
 
 def _albedo_lookup(table, cos_o):
+    """Each term's albedo (..., B), linear in √cos θ_o."""
     n = table.albedo.shape[0]
     t = jnp.sqrt(jnp.clip(cos_o, 0.0, 1.0)) * (n - 1)
     i0 = jnp.clip(jnp.floor(t), 0, n - 2)
-    f = t - i0
+    f = (t - i0)[..., None]
     i0 = i0.astype(jnp.int32)
     return table.albedo[i0] * (1 - f) + table.albedo[i0 + 1] * f
 
 
-def _brightness(table, normal, view, omega_r, cos_o, alpha, brightness):
-    """(A(θ_o) (…,), P_k (…, 3)): the brightness of the material. `brightness` None: the
-    split sum, P_k(ω_r, α) from the table; a `PrefilteredEnvMap` of the same map: the mean of
-    the improved model's per-bin reads (`prefilter.bin_radiance`), A from the table."""
+def _brightness(table, normal, view, omega_r, cos_o, brightness):
+    """(coloured (…, 3), uncoloured (…, 3)): Σ_b A_b(θ_o) P_b over the table's brightness
+    terms, the coat apart. `brightness` None: the split sum, P_b from the table (a lobe at
+    ω_r, the Lambert term at n, the coat at ω_r); a `PrefilteredEnvMap` of the same map: a
+    film's lobe reads the improved model's bins instead (`prefilter.bin_radiance`)."""
     a = _albedo_lookup(table, cos_o)
-    if brightness is None:
-        return a, lookup_bilinear(table.brightness, omega_r)
-    bins = bin_table(dtype=cos_o.dtype)
-    return a, jnp.mean(bin_radiance(brightness, bins, normal, view, cos_o,
-                                    jnp.asarray(alpha, cos_o.dtype)), axis=-2)
+    coloured = jnp.zeros(cos_o.shape + (3,), cos_o.dtype)
+    plain = jnp.zeros_like(coloured)
+    for b, term in enumerate(table.terms):
+        if brightness is not None:
+            if table.terms != ("specular",):
+                raise ValueError("brightness=PrefilteredEnvMap applies to a film's table "
+                                 "(one GGX lobe), not to a car paint's")
+            bins = bin_table(dtype=cos_o.dtype)
+            p = jnp.mean(bin_radiance(brightness, bins, normal, view, cos_o,
+                                      jnp.asarray(table.alphas[b], cos_o.dtype)), axis=-2)
+        else:
+            p = lookup_bilinear(table.brightness[b], normal if term == "diffuse" else omega_r)
+        if term == "coat":
+            plain = plain + a[..., b, None] * p
+        else:
+            coloured = coloured + a[..., b, None] * p
+    return coloured, plain
 
 
-def colour_table_radiance(table: ColourTable, normal, view, *, rank: int | None = 0,
-                          brightness=None) -> Array:
-    """L_j (..., J) = A(θ_o) Σ_k C_jk(ω_r, θ_o) P_k (module docstring); 0 where ⟨n, ω_o⟩ ≤ 0.
+def _shade(table, c, coloured, plain, up):
+    if table.cross:
+        out = jnp.sum(c.reshape(c.shape[:-1] + (-1, 3)) * coloured[..., None, :], -1)
+    else:
+        out = c * coloured
+    return jnp.where(up[..., None], out + plain, 0.0)
 
-    rank: 0 = the stored decomposition, r = its first r terms, None = the 3D table.
-    brightness: None = the split sum P_k(ω_r, α) of K&K 2022; a `PrefilteredEnvMap` of the
-        same map = the improved model's per-bin reads averaged (a brightness that follows
-        the lobe's off-specular shift and spread; docs/improved.md)."""
-    normal = jnp.asarray(normal)
-    view = jnp.asarray(view)
-    dtype = jnp.result_type(normal, view, table.colour)
+
+def _geometry(normal, view, dtype):
     normal, view = (jnp.asarray(x, dtype) for x in (normal, view))
     shape = jnp.broadcast_shapes(normal.shape, view.shape)
     normal, view = (jnp.broadcast_to(x, shape) for x in (normal, view))
     cos_o = jnp.sum(normal * view, -1)
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
-    refl = 2 * co[..., None] * normal - view
+    return normal, view, up, co, 2 * co[..., None] * normal - view
+
+
+def colour_table_radiance(table: ColourTable, normal, view, *, rank: int | None = 0,
+                          brightness=None) -> Array:
+    """L_j (..., J) = Σ_k C_jk(ω_r, θ_o) B_k + coat (module docstring); 0 where ⟨n,ω_o⟩ ≤ 0.
+
+    B_k = Σ_b A_b(θ_o) P_b,k: the split-sum brightness of the material's terms (a film: one
+    GGX lobe; a paint: its lobes, its Lambert term read at n; the coat's mirror F(θ_o)
+    P(ω_r) is added uncoloured).
+    rank: 0 = the stored decomposition, r = its first r terms, None = the 3D table.
+    brightness: None = the split sum of K&K 2022; a `PrefilteredEnvMap` of the same map
+        (films only) = the improved model's per-bin reads averaged, a brightness that
+        follows the lobe's off-specular shift and spread (docs/improved.md)."""
+    dtype = jnp.result_type(jnp.asarray(normal), jnp.asarray(view), table.colour)
+    normal, view, up, co, refl = _geometry(normal, view, dtype)
     table = jax.tree.map(lambda x: jnp.asarray(x, dtype), table)
     c = table_colour(table, refl, co, rank)
-    a, p = _brightness(table, normal, view, refl, co, table.material[-1], brightness)
-    if table.cross:
-        out = jnp.sum(c.reshape(c.shape[:-1] + (-1, 3)) * p[..., None, :], -1)
-    else:
-        out = c * p
-    return jnp.where(up[..., None], a[..., None] * out, 0.0)
+    return _shade(table, c, *_brightness(table, normal, view, refl, co, brightness), up)
 
 
 # ----------------------------------------------------------------------------- the ceiling
-def exact_colour_radiance(film: Film, alpha, normal, view, envmap, table: ColourTable, *,
+def exact_colour_radiance(material, alpha, normal, view, envmap, table: ColourTable, *,
                           observer: str = DEFAULT_OBSERVER, subdivisions: int | None = None,
                           n_cos: int = 512, chunk: int = 64, brightness=None) -> Array:
-    """The method's ceiling: the split-sum brightness of `table` times the colour computed
-    exactly at each shading point, C_jk = ∫ f_b⟨n,ω_i⟩ R_jk L_k / ∫ f_b⟨n,ω_i⟩ L_k (no table,
-    no marginalisation): what the colour table would give if its colour were exact.
+    """The method's ceiling: the brightness of `table` times the colour computed exactly at
+    each shading point, C = ∫ f_b⟨n,ω_i⟩ χ L_k / ∫ f_b⟨n,ω_i⟩ L_k (no table, no
+    marginalisation): what a colour table would give if its colour were exact.
+    material: the `Film` (with `alpha`) or `CarPaint` (alpha None) of `table`;
     normal, view (N, 3) unit vectors → (N, J); `brightness` as `colour_table_radiance`."""
+    check_colour_table(table, material, alpha, envmap)
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
-    a = float(alpha)
-    f64 = jnp.result_type(float)  # float64 where enabled (the reference precision)
-    src, sh, sw, s = _source_map(env, a, subdivisions)
+    f64 = jnp.result_type(float)
+    paint = isinstance(material, CarPaint)
+    a_min = (float(np.min(np.asarray(material.lobe_alpha))) if paint else float(alpha))
+    src, sh, sw, s = _source_map(env, a_min, subdivisions)
     d, wgt, idx = texel_nodes(sh, sw, s)
     light = jnp.asarray(np.asarray(src.radiance, np.float64).reshape(-1, 3)[idx], f64)
-    film = Film(*(jnp.asarray(x, f64) for x in film))
-    r_tab = _r_table(film, cross_band_name(observer), n_cos, choose_arithmetic(film, "auto"),
-                     f64)
-    normal = jnp.asarray(normal, f64).reshape(-1, 3)
-    view = jnp.asarray(view, f64).reshape(-1, 3)
-    cos_o = jnp.sum(normal * view, -1)
-    up = cos_o > 0
-    sums = [_film_sums(normal, jnp.where(up[:, None], view, normal), jnp.asarray(a, f64),
-                       jnp.asarray(d, f64), jnp.asarray(wgt, f64), lt, r_tab, chunk)
+    if paint:
+        point, mat = _paint_point, CarPaint(*(jnp.asarray(x, f64) for x in material))
+    else:
+        film = Film(*(jnp.asarray(x, f64) for x in material))
+        r_tab = _r_table(film, cross_band_name(observer), n_cos,
+                         choose_arithmetic(film, "auto"), f64)
+        point, mat = _film_point, (jnp.asarray(a_min, f64), r_tab)
+    normal, view, up, co, refl = _geometry(jnp.asarray(normal).reshape(-1, 3),
+                                           jnp.asarray(view).reshape(-1, 3), f64)
+    sums = [_config_sums(point, mat, normal, jnp.where(up[:, None], view, normal),
+                         jnp.asarray(d, f64), jnp.asarray(wgt, f64), lt, chunk)
             for lt in (light, jnp.ones_like(light))]
     (den, num), (den1, num1) = sums
-    c = _ratio(num, den, num1, den1, True)
-    co = jnp.where(up, cos_o, 1.0)
-    refl = 2 * co[:, None] * normal - view
-    aa, p = _brightness(table, normal, view, refl, co, a, brightness)
-    out = jnp.sum(c.reshape(-1, get_observer(observer).n_bands, 3) * p[:, None, :], -1)
-    return jnp.where(up[:, None], aa[:, None] * out, 0.0)
+    c = _ratio(num, den, num1, den1, not paint)
+    table = jax.tree.map(lambda x: jnp.asarray(x, f64), table)
+    return _shade(table, c, *_brightness(table, normal, view, refl, co, brightness), up)

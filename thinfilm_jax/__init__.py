@@ -72,6 +72,11 @@ from .shading.prefilter import PrefilteredEnvMap as PrefilteredEnvMap
 from .shading.prefilter import prefilter_envmap as prefilter_envmap
 from .shading.colour_table import ColourTable as ColourTable
 from .shading.colour_table import prefilter_colour as prefilter_colour
+from .brdf.carpaint import CarPaint as CarPaint
+from .brdf.carpaint import car_paint as car_paint
+from .brdf.carpaint import PAINTS as PAINTS
+from .shading.carpaint_ibl import paint_envmap_radiance as paint_envmap_radiance
+from .shading.carpaint_ibl import paint_patch_radiance as paint_patch_radiance
 from .spectral.khr import khr_reflectance as khr_reflectance
 from .spectral.reflectance import rgb_reflectance as rgb_reflectance
 from .optics.series import SeriesTerms as SeriesTerms

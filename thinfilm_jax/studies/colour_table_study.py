@@ -15,6 +15,10 @@ hemisphere, a fixed seed) against `envmap_radiance(method="reference")`:
   method beyond the paper;
 * `filtered` (K 29, the published method) and `improved` (docs/improved.md).
 
+And each example car paint (`carpaint.PAINTS`: metallic, pearlescent, plain; their own
+lobes, colour tables and clear coat): the table (ranks 1, 2, 3D) and the exact-colour
+ceiling against the paint's exact reference (`carpaint_ibl.paint_envmap_radiance`).
+
 ΔE: CIEDE2000 with the mirror as white (`colorimetry.delta_e2000`), mean and 95th
 percentile per map × film (no average over maps is reported: each map is its own case).
 Cost: warm wall time per shading point of each real-time method on 65,536 float32 points
@@ -28,7 +32,7 @@ colour table per film (or a thickness axis): there the per-point methods win by 
 Example (the configuration of the smoke test):
     >>> from thinfilm_jax.studies.colour_table_study import CASES, TableStudyConfig
     >>> TableStudyConfig.quick().maps, sorted(CASES)
-    (('venice_sunset',), ['fig3_metal', 'fig4'])
+    (('venice_sunset',), ['fig3_metal', 'fig4', 'paint_metallic', 'paint_pearlescent', 'paint_plain'])
 """
 
 from __future__ import annotations
@@ -42,9 +46,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core._io import atomic_write, write_json
+from ..brdf.carpaint import PAINTS
 from ..core.film import Film
 from ..shading.colour_table import (colour_table_radiance, decomposition_error,
                                     exact_colour_radiance, prefilter_colour)
+from ..shading.carpaint_ibl import paint_envmap_radiance
 from ..shading.envmap import SHIPPED, load_envmap
 from ..shading.ibl import envmap_radiance
 from ..shading.prefilter import prefilter_envmap
@@ -52,7 +58,9 @@ from ..spectral.colorimetry import delta_e2000
 from ._timing import environment, time_call
 
 CASES = {"fig4": (Film(600.0, 1.2, 2.0, 0.0), 0.25),
-         "fig3_metal": (Film(650.0, 1.3, 2.0, 0.5), 0.12)}
+         "fig3_metal": (Film(650.0, 1.3, 2.0, 0.5), 0.12),
+         "paint_metallic": ("metallic", None), "paint_pearlescent": ("pearlescent", None),
+         "paint_plain": ("plain", None)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,7 +121,47 @@ def _cost(cfg, film, alpha, table, pref):
     return out
 
 
+def run_paint_case(cfg: TableStudyConfig, map_name: str, case: str, verbose: bool) -> dict:
+    """A car paint (`carpaint.PAINTS`): the table (ranks 1, 2, 3D) and its exact-colour
+    ceiling against the paint's exact reference (`carpaint_ibl.paint_envmap_radiance`)."""
+    paint = PAINTS[CASES[case][0]]()
+    env = load_envmap(map_name)
+    n, v = shading_points(cfg.points, cfg.seed)
+    t0 = time.perf_counter()
+    table = prefilter_colour(env, paint, rank=2)
+    build = time.perf_counter() - t0
+    ref = paint_envmap_radiance(paint, n, v, env, method="reference")
+    rows = {"colour_table": colour_table_radiance(table, n, v, rank=1),
+            "colour_table_rank2": colour_table_radiance(table, n, v, rank=2),
+            "colour_table_3d": colour_table_radiance(table, n, v, rank=None),
+            "ceiling": exact_colour_radiance(paint, None, n, v, env, table)}
+    rank1 = dataclasses.replace(table, colour=table.colour[..., :1, :],
+                                view=table.view[:, :1, :])
+    n32, v32 = (jnp.asarray(x, jnp.float32) for x in shading_points(cfg.timing_points,
+                                                                   cfg.seed + 1))
+    t32 = jax.tree.map(lambda x: x.astype(jnp.float32), rank1)
+    _, t = time_call(jax.jit(lambda a, b: colour_table_radiance(t32, a, b)), (n32, v32),
+                     cfg.repeats)
+    out = {"map": map_name, "case": case, "build_s": build,
+           "decomposition_error_rank1": decomposition_error(rank1),
+           "decomposition_error_rank2": decomposition_error(table),
+           "memory_bytes": {"colour_table_rank1": rank1.nbytes["colour_table"],
+                            "table_brightness": rank1.nbytes["brightness"],
+                            "table_3d": table.nbytes["full_table"]},
+           "errors": {k: _stats(x, ref) for k, x in rows.items()},
+           "cost": {"colour_table": {"ns_per_point": t.warm_s / cfg.timing_points * 1e9,
+                                     "compile_s": t.compile_s}}}
+    if verbose:
+        e = out["errors"]
+        print(f"{map_name:14s} {case:18s} build {build:5.1f} s  "
+              + "  ".join(f"{k} {e[k]['dE2000_mean']:.2f}" for k in ("colour_table", "ceiling")),
+              flush=True)
+    return out
+
+
 def run_case(cfg: TableStudyConfig, map_name: str, case: str, verbose: bool = True) -> dict:
+    if case.startswith("paint_"):
+        return run_paint_case(cfg, map_name, case, verbose)
     film, alpha = CASES[case]
     env = load_envmap(map_name)
     n, v = shading_points(cfg.points, cfg.seed)
@@ -162,34 +210,54 @@ def markdown(result) -> str:
     for r in result["rows"]:
         e = r["errors"]
         lines.append(f"| {r['map']} | {r['case']} | " + " | ".join(
-            f"{e[c]['dE2000_mean']:.2f} / {e[c]['dE2000_p95']:.2f}" for c in cols) + " |")
+            f"{e[c]['dE2000_mean']:.2f} / {e[c]['dE2000_p95']:.2f}" if c in e else "–"
+            for c in cols) + " |")
     lines += ["", "CIEDE2000 mean / p95 against the exact reference (module docstring).", "",
               "| map | film | build (s) | rank-1 decomposition error | table + brightness (kB) | "
               "prefiltered map (kB) | colour_table (ns/pt) | filtered (ns/pt) | "
               "improved (ns/pt) |", "|---|---|---|---|---|---|---|---|---|"]
     for r in result["rows"]:
         m, c = r["memory_bytes"], r["cost"]
+        ns = lambda k: f"{c[k]['ns_per_point']:.0f}" if k in c else "–"  # noqa: E731
         lines.append(
             f"| {r['map']} | {r['case']} | {r['build_s']:.1f} | "
             f"{r['decomposition_error_rank1']:.3g} | "
             f"{(m['colour_table_rank1'] + m['table_brightness']) / 1024:.0f} | "
-            f"{m['prefiltered_map'] / 1024:.0f} | {c['colour_table']['ns_per_point']:.0f} | "
-            f"{c['filtered']['ns_per_point']:.0f} | {c['improved']['ns_per_point']:.0f} |")
+            + (f"{m['prefiltered_map'] / 1024:.0f}" if "prefiltered_map" in m else "–")
+            + f" | {ns('colour_table')} | {ns('filtered')} | {ns('improved')} |")
     return "\n".join(lines) + "\n"
 
 
 def run_colour_table_study(out="figures", quick: bool = False, verbose: bool = True,
-                           cfg: TableStudyConfig | None = None) -> dict:
-    """Every map × case (module docstring); writes colour_table.{json,md} into `out`."""
+                           cfg: TableStudyConfig | None = None, resume: bool = True) -> dict:
+    """Every map × case (module docstring); writes colour_table.{json,md} into `out` after
+    each case. `resume`: keep the rows of an earlier run of the same configuration found
+    there (a run cut short goes on where it stopped)."""
     cfg = cfg or (TableStudyConfig.quick() if quick else TableStudyConfig())
     result = {"config": dataclasses.asdict(cfg), "environment": environment(), "rows": []}
     name = "colour_table_quick" if quick else "colour_table"
+    done = _finished(out, name, result["config"]) if resume else {}
     for m in cfg.maps:
         for c in cfg.cases:
-            result["rows"].append(run_case(cfg, m, c, verbose))
+            row = done.get((m, c)) or run_case(cfg, m, c, verbose)
+            result["rows"].append(row)
             if out is not None:  # after every case: a long run keeps what it finished
                 Path(out).mkdir(parents=True, exist_ok=True)
                 write_json(Path(out) / f"{name}.json", result)
                 atomic_write(Path(out) / f"{name}.md",
                              lambda p: Path(p).write_text(markdown(result)))
     return result
+
+
+def _finished(out, name, config) -> dict:
+    """Rows of an earlier run with the same configuration, by (map, case)."""
+    path = Path(out) / f"{name}.json" if out is not None else None
+    if path is None or not path.exists():
+        return {}
+    import json
+
+    old = json.loads(path.read_text())
+    keep = {k: v for k, v in old.get("config", {}).items() if k not in ("maps", "cases")}
+    if keep != {k: v for k, v in config.items() if k not in ("maps", "cases")}:
+        return {}
+    return {(r["map"], r["case"]): r for r in old.get("rows", [])}

@@ -367,3 +367,15 @@ def test_bad_directions_and_pigments():
         C.pearlescent_colour(tf.Film(-1.0, 2.6, 1.56, 0.0, 1.5))
     with pytest.raises(ValueError, match="quadrature"):
         C.lobe_albedo(p, 0.5, quadrature=(0, 4))
+
+
+def test_patch_nodes_shapes_and_sums():
+    p = C.PAINTS["metallic"]()
+    c = np.cos(np.array([[0.2, 1.0]]))
+    wl, w_l, wd, w_d = C.paint_patch_nodes(p, c, quadrature=(8, 6), diffuse_quadrature=(4, 4))
+    assert wl.shape == (1, 2, 3, 48, 3) and w_l.shape == (1, 2, 3, 48)
+    assert wd.shape == (1, 2, 16, 3) and w_d.shape == (1, 2, 16)
+    np.testing.assert_allclose(np.linalg.norm(wl, axis=-1), 1.0, atol=1e-12)
+    alb = C.lobe_albedo(p, c, quadrature=(8, 6), diffuse_quadrature=(4, 4))
+    np.testing.assert_allclose(np.concatenate([w_l.sum(-1), w_d.sum(-1)[..., None]], -1), alb,
+                               rtol=1e-13)

@@ -488,8 +488,9 @@ def lobe_albedo(paint: CarPaint, cos_o, *, quadrature=DEFAULT_PAINT_QUADRATURE,
     the coat with colour 1: ∫ T_i T_o f_b,l cos θ_i dω_i/η_c² (module docstring); 0 for
     cos θ_o ≤ 0. coat_reflectance + Σ lobe_albedo ≤ 1 when the lobes' own albedos are ≤ 1.
 
-    Accuracy (float64, tests/brdf/test_carpaint.py): against a brute-force ω_i product rule
-    and against twice the orders, ≤ 1e-6 at the default orders for α ≥ 0.05, views to 1.5 rad.
+    Accuracy (float64, tests/brdf/test_carpaint.py): the default orders agree with a
+    brute-force rule over the outside ω_i to 1e-15 (α = 0.15, 0.3) and with (256, 256) to
+    ≤ 4e-11 for α ≥ 0.05, θ_o ≤ 1.55, coat or none; 1.4e-8 at α = 0.01 (against (512, 512)).
     """
     check_paint(paint)
     cos_o = V.check_range("cos_o", cos_o, -1.0, 1.0, ulps=V.ROUNDING_ULPS, clamp=True)

@@ -12,14 +12,15 @@ colour table, seen through the coat) and the coat's mirror term F(θ_o) L(ω_r),
   rule (`brdf.carpaint.paint_patch_nodes`) evaluated against the colour table at every node.
   Colour 1 gives `coat_reflectance` + Σ `lobe_albedo` (converged to ≈ 1e-11). A bilinear
   colour table has kinks on its grid lines, which no node set follows, so the colour part
-  converges algebraically: measured against (256, 256)/(128, 128) orders for the example
-  paints (tests/shading/test_carpaint_ibl.py), the default orders are within 2e-4 (metallic,
-  91-row θ_d table) and 4e-5 (pearlescent).
+  converges algebraically, yet fast for the example paints: against (256, 256)/(128, 128)
+  orders the defaults are within 8e-15 (plain), 2.5e-9 (metallic) and 5.4e-8 (pearlescent),
+  θ_o ∈ {0, 0.5, 1.2, 1.5} (tests/shading/test_carpaint_ibl.py).
 * `paint_envmap_radiance(paint, normal, view, envmap, method="reference")`: every texel of the
   piecewise-constant map with s × s Gauss–Legendre nodes in (cos θ, φ)
   (`ibl_reference.texel_nodes`, the exhaustive rule of `material_envmap_radiance`;
   s = `ibl_reference.auto_subdivisions` of the sharpest lobe's α unless given), plus the
   mirror term read from the texel that contains ω_r (exact for the piecewise-constant map).
+  A constant 16 × 32 map reproduces the patch to ≤ 1.1e-7 (example paints, s automatic).
 * `method="mc"`: one-sample mixture importance sampling (Veach 1997, §9.2) of ω_i: with equal
   probability a cosine-weighted direction (pdf ⟨n,ω_i⟩/π) or, for lobe l, a GGX half vector
   h' inside the coat (pdf D_l⟨n,h'⟩, Walter et al. 2007, Eq. 35), reflected into ω_i' about

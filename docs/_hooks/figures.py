@@ -84,4 +84,7 @@ class DoctestExtension(Extension):
 @event_priority(100)  # before mkdocstrings reads the extensions for its docstring renderer
 def on_config(config):
     config["markdown_extensions"].append(DoctestExtension())
+    # `--8<-- "figures/x.md"` paths are from the repository root, wherever mkdocs runs
+    root = str(Path(config["config_file_path"]).resolve().parent)
+    config["mdx_configs"].setdefault("pymdownx.snippets", {})["base_path"] = [root]
     return config

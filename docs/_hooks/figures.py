@@ -50,11 +50,27 @@ _FENCE = re.compile(r"^\s*(```|~~~)")
 _PROMPT = re.compile(r"^(\s*)>>>( |$)")
 
 
+_DETAILS = re.compile(r"^\?\?\?\+? ")
+_HEADING = re.compile(r"^(\s{4,})#{1,6} +(.*?)\s*#*\s*$")
+
+
 class _DoctestFences(Preprocessor):
     def run(self, lines):
-        out, i, fence = [], 0, None
+        out, i, fence, details = [], 0, None, False
         while i < len(lines):
             line = lines[i]
+            # a study's report included in a collapsible block (`??? ...` + snippets) keeps
+            # its text, but its headings become bold lines: they would otherwise enter the
+            # page's table of contents above the page's own sections
+            if _DETAILS.match(line):
+                details = True
+            elif details and line.strip() and not line.startswith("    "):
+                details = False
+            h = _HEADING.match(line) if details and not fence else None
+            if h:
+                out.append(f"{h.group(1)}**{h.group(2)}**")
+                i += 1
+                continue
             m = _FENCE.match(line)
             if m:
                 fence = None if fence == m.group(1) else (fence or m.group(1))

@@ -9,6 +9,8 @@
 * docs/reference/layout.md lists every module of the package once (the README's "Layout").
 * Every page under docs/ is in the nav (except the draft and the hook that mkdocs.yml
   excludes).
+* The measured numbers of the studies pages agree with figures/ (the checks of
+  tests/test_readme_numbers.py, applied to those pages).
 
 Build time here: about 3 s on one core (the API pages read the source statically).
 """
@@ -168,6 +170,24 @@ def test_layout_page_lists_every_module():
     assert len(listed) == len(set(listed)), "a module is listed twice"
     missing, extra = sorted(set(modules) - set(listed)), sorted(set(listed) - set(modules))
     assert not missing and not extra, f"add to docs/reference/layout.md: {missing}; remove: {extra}"
+
+
+# The studies pages carry the README's measured tables and sentences (copied, with their
+# captions): tests/test_readme_numbers.py's checks hold on them too, read as one text in this
+# order (each table and checked sentence once; the theory pages quote some again, unchecked).
+NUMBER_PAGES = ("studies/figure7.md", "studies/ibl.md", "studies/improved.md",
+                "studies/classic-models.md", "theory/accuracy.md", "studies/fitting.md",
+                "studies/error-runtime.md", "studies/performance.md", "how-to/devices.md",
+                "studies/scaling.md", "getting-started/conventions.md")
+
+
+def test_studies_numbers_match_artifacts():
+    import test_readme_numbers as numbers
+
+    text = "\n\n".join((DOCS / p).read_text("utf-8") for p in NUMBER_PAGES)
+    mismatches = numbers.check(text)
+    assert not mismatches, "docs pages disagree with figures/:\n" + "\n".join(map(str, mismatches))
+    assert numbers.unchecked_tables(text) == []
 
 
 def test_every_page_is_in_the_nav():

@@ -70,6 +70,8 @@ from .shading.material_patch import material_patch_radiance as material_patch_ra
 from .shading.material_ibl import material_envmap_radiance as material_envmap_radiance
 from .shading.prefilter import PrefilteredEnvMap as PrefilteredEnvMap
 from .shading.prefilter import prefilter_envmap as prefilter_envmap
+from .shading.colour_table import ColourTable as ColourTable
+from .shading.colour_table import prefilter_colour as prefilter_colour
 from .spectral.khr import khr_reflectance as khr_reflectance
 from .spectral.reflectance import rgb_reflectance as rgb_reflectance
 from .optics.series import SeriesTerms as SeriesTerms

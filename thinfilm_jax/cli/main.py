@@ -51,6 +51,10 @@ def _bench(args) -> int:
         from ..studies.models_bench import run_models_bench
 
         run_models_bench(out=args.out, quick=args.quick)
+    if args.suite in ("colour_table", "all"):
+        from ..studies.colour_table_study import run_colour_table_study
+
+        run_colour_table_study(out=args.out, quick=args.quick)
     return 0
 
 
@@ -122,7 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "run time) and measure its error; print a table, write JSON.")
     b.add_argument("--out", default="figures", help="output folder (default: figures)")
     b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
-    b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "models", "all"],
+    b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "models",
+                                       "colour_table", "all"],
                    default="core",
                    help="core: error vs run time, peers, specialisation (default); ibl: the "
                         "2560×1440 IBL frame and the real-time options' errors; scaling: the "
@@ -130,7 +135,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "method='improved' against filtered (regions, IBL renders, "
                         "kernel cost, Pareto); models: the classic lobes with a thin film, "
                         "Schlick tint and the film methods against the exact film "
-                        "(figures/models.*); all: the five")
+                        "(figures/models.*); colour_table: Kneiphof & Klein 2022's prefiltered "
+                        "colour table against filtered, improved and the reference per map "
+                        "(figures/colour_table.*); all: the six")
     b.set_defaults(func=_bench)
 
     from ..shading.envmap import SHIPPED

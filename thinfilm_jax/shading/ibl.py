@@ -10,6 +10,7 @@ $$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega
 | `ideal`     | A(θ_o, α) · Σ_k R_jk(cos θ_o) P_k(ω_r, α): BB17 under the split sum (`kernels.ideal_kernel`, Ŝ from the LUT at σ = 0 by default) |
 | `filtered`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_r, α), R̄ = K 29 with the prefiltered moments μ_ω, Σ_ω (`kernels.filtered_kernel`) |
 | `khr`       | A(θ_o, α) · F_iridescence(cos θ_o) ⊙ P(ω_r, α): glTF `KHR_materials_iridescence` (SPEC §10, `spectral.khr`) at h = n as `ideal`, per channel: its linear Rec. 709 RGB times the map's linear RGB, the vec3 Fresnel × vec3 prefiltered specular product glTF engines compute (the Khronos sample renderer's `pbr.frag` reads F_iridescence at ⟨n, v⟩ and multiplies the prefiltered radiance by it with no split-sum scale: its value is this one over A); `cross_band`, `options` and the map's Ŝ table do not apply; a map with split sources is refused |
+| `colour_table` | A(θ_o, α) · Σ_k C_jk(ω_r, θ_o) P_k(ω_r, α): Kneiphof & Klein 2022, the colour R_jk prefiltered with the map and the GGX lobe into a table over (ω_r, θ_o), decomposed into a map of ω_r times a function of θ_o (`colour_table`, SPEC §11); `envmap` is the `ColourTable` that `prefilter_colour` built for this film and α (checked) |
 | `improved`  | A(θ_o, α) · (1/K) Σ_b Σ_k R_jk(bin b) P_k(ω_μ,b, α_eff,b): K 29 per equal-probability bin b of cos θ₁, each bin times the prefiltered radiance of its own part of the lobe (tabulated mean direction and equal-variance level; near normal view their mean moved to the whole lobe's read) (`ibl.improved_envmap`, docs/improved.md) |
 
 R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the per-channel
@@ -49,24 +50,24 @@ from jax import Array
 
 from ..core import _validate as V
 from ..optics.airy import choose_arithmetic
+from .colour_table import ColourTable, check_colour_table, colour_table_radiance
 from .envmap import EnvMap, load_envmap
 from ..core.film import Film
 from .ibl_reference import (_interp, _lobe_cos_weight, _r_table,  # noqa: F401 (re-exported)
                             auto_subdivisions, exact_radiance, texel_nodes)
 from ..optics.fresnel import safe_sqrt
-from ..realtime.improved import (BinTable, _bilinear, bin_table, improved_bins, lookup_bins,
-                       lookup_lobe)
+from ..realtime.improved import BinTable, bin_table, improved_bins, lookup_bins
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..spectral.khr import khr_bands
 from ..spectral.lut import build_shat_lut
 from ..realtime.options import ModelOptions, check_options
-from .prefilter import (PrefilteredEnvMap, lookup_albedo, lookup_prefiltered, lookup_radiance,
+from .prefilter import (PrefilteredEnvMap, bin_radiance, lookup_albedo, lookup_prefiltered,
                         moments_to_mean_cov, prefilter_envmap)
 from .sources import source_radiance
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from ..spectral.uplift import cross_band_name
 
-METHODS = ("reference", "mc", "ideal", "filtered", "improved", "khr")
+METHODS = ("reference", "mc", "ideal", "filtered", "improved", "khr", "colour_table")
 REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST
 DEFAULT_SOURCES = 4  # suns split from a map that `improved` prefilters itself
@@ -86,7 +87,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         alpha: GGX roughness α ∈ (0, 1].
         normal, view: unit world vectors (..., 3) (z-up); view points toward the eye.
         envmap: `EnvMap` (any method; real-time methods prefilter it on the host each call)
-            or `PrefilteredEnvMap` (real-time methods only; build it once).
+            or `PrefilteredEnvMap` (real-time methods only; build it once); for
+            "colour_table" the `ColourTable` of `prefilter_colour(map, film, alpha)`.
         method: "reference" | "mc" | "ideal" | "filtered" | "improved" | "khr" (glTF
             `F_iridescence` in linear Rec. 709 under the split sum, module table; its
             observer must stay the default, and a `PrefilteredEnvMap` with sources is
@@ -116,6 +118,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     V.check_film(film)
     V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
     V.check_choice("method", method, METHODS)
+    if method == "colour_table" or isinstance(envmap, ColourTable):
+        return _colour_table(film, alpha, normal, view, envmap, method, observer)
     V.check_choice("observer", observer, OBSERVERS)
     if method == "khr" and observer != DEFAULT_OBSERVER:
         raise ValueError(f"method='khr' gives linear Rec. 709 RGB: observer={observer!r} "
@@ -173,6 +177,27 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
                           n_samples=n_samples, key=key, batch_size=batch_size,
                           max_height=max_height)
 
+
+
+def _colour_table(film, alpha, normal, view, table, method, observer):
+    """method="colour_table": the checks of SPEC §11, then `colour_table_radiance`."""
+    if method != "colour_table":
+        raise ValueError(f"a ColourTable is read by method='colour_table' only, got "
+                         f"method={method!r}")
+    check_colour_table(table, film, alpha)
+    if observer != table.observer:
+        raise ValueError(f"the ColourTable holds the bands of observer={table.observer!r}, "
+                         f"got observer={observer!r}")
+    for name, v in (("normal", normal), ("view", view)):
+        if np.shape(v)[-1:] != (3,):
+            raise ValueError(f"{name} must have shape (..., 3), got {np.shape(v)}")
+        if V.is_concrete(v):
+            V.check_finite(name, v)
+    shape = V.check_broadcast([("film", np.zeros(film.shape)), ("alpha", alpha),
+                               ("normal", np.zeros(np.shape(normal)[:-1])),
+                               ("view", np.zeros(np.shape(view)[:-1]))])
+    nv = [jnp.broadcast_to(jnp.asarray(v), shape + (3,)) for v in (normal, view)]
+    return colour_table_radiance(table, *nv)
 
 
 # ----------------------------------------------------------------------------- real time
@@ -297,13 +322,7 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
     a = lookup_albedo(pref, co, safe_sqrt(alpha))
-    dirn, sqa_eff = lookup_lobe(table, normal, view, co, alpha)  # (..., K + 1, 3), (..., K + 1)
-    rad = lookup_radiance(pref, dirn, sqa_eff)  # (..., K + 1, 3)
-    # the bins' reads carry the light–film coupling; where the bins are rings round ω_o
-    # (near normal view) their mean is moved to the whole lobe's read (module docstring)
-    w = _bilinear(table.ring, safe_sqrt(co), safe_sqrt(alpha))[..., None, None]
-    rad = rad[..., :-1, :] + w * (rad[..., -1:, :] - jnp.mean(rad[..., :-1, :], axis=-2,
-                                                             keepdims=True))
+    rad = bin_radiance(pref, table, normal, view, co, alpha)  # (..., K, 3)
     cb, sb = lookup_bins(table, co, alpha)
     obs = cross_band_name(observer) if cross_band else observer
     r = improved_bins(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,

@@ -51,7 +51,8 @@ from jax import Array
 from ..core import _validate as V
 from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance_weights,
                      texel_centers, texel_solid_angles)
-from ..optics.fresnel import complex_dtype
+from ..optics.fresnel import complex_dtype, safe_sqrt
+from ..realtime.improved import _bilinear, lookup_lobe
 from ..spectral.lut import ShatLUT, build_shat_lut
 from ..brdf.microfacet import albedo, normal_distribution, smith_g2
 from .sources import Sources, extract_sources, with_film_tables
@@ -258,6 +259,18 @@ def lookup_albedo(pref: PrefilteredEnvMap, cos_o, sqrt_alpha):
     a0 = tab[j0, i0] * (1 - fu) + tab[j0 + 1, i0] * fu
     a1 = tab[j0, i0 + 1] * (1 - fu) + tab[j0 + 1, i0 + 1] * fu
     return a0 * (1 - fa) + a1 * fa
+
+
+def bin_radiance(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha):
+    """The prefiltered radiance of each bin of the improved model (..., K, 3): read at the
+    bin's mean light direction and equal-variance level (`improved.lookup_lobe`); where the
+    bins are rings round ω_o (near normal view, ring weight w of `BinTable.ring`) their
+    mean is moved to the whole lobe's read (docs/improved.md). cos_o = ⟨n, ω_o⟩ > 0."""
+    dirn, sqa_eff = lookup_lobe(table, normal, view, cos_o, alpha)  # (..., K + 1, 3), (..., K + 1)
+    rad = lookup_radiance(pref, dirn, sqa_eff)  # (..., K + 1, 3)
+    w = _bilinear(table.ring, safe_sqrt(cos_o), safe_sqrt(alpha))[..., None, None]
+    return rad[..., :-1, :] + w * (rad[..., -1:, :] - jnp.mean(rad[..., :-1, :], axis=-2,
+                                                              keepdims=True))
 
 
 def moments_to_mean_cov(m):

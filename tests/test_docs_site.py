@@ -146,6 +146,13 @@ def test_every_public_name_is_a_target_of_the_api_pages():
     assert not missing, "add to docs/api/*.md: " + ", ".join(missing)
 
 
+def test_api_index_lists_every_public_name():
+    """docs/api/index.md has a row per public name (the table a reader scans first)."""
+    listed = set(re.findall(r"^\| `(\w+)` \|", (API / "index.md").read_text("utf-8"), flags=re.M))
+    missing = sorted(set(exports()) - listed)
+    assert not missing, f"add a row to docs/api/index.md for: {missing}"
+
+
 def test_the_coverage_check_fails_when_a_name_is_missing():
     """The check itself: a page without the module, or with a member list that leaves the
     name out, does not cover it; the module or the name itself does."""

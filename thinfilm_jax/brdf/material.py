@@ -402,7 +402,7 @@ def brdf_value(material: Material, wi, wo, n, t=None):
         wi, wo: unit light and view directions (..., 3), pointing away from the surface.
         n: unit normal (..., 3).
         t: unit tangent ⟂ n (..., 3), the direction of α_x / n_u; required by the anisotropic
-           NDFs ("ggx_aniso", "ashikhmin_shirley"), ignored by the others. b = n × t.
+            NDFs ("ggx_aniso", "ashikhmin_shirley"), ignored by the others. b = n × t.
 
     0 where ⟨n,ω_i⟩ ≤ 0 or ⟨n,ω_o⟩ ≤ 0. jit/vmap/grad safe (finite gradients on the closed
     upper hemisphere, h = n included).

@@ -81,8 +81,8 @@ def batch_mesh(devices=None) -> Mesh:
             a sequence of `jax.Device`, or a 1-D `Mesh` (returned as is).
 
     Raises:
-        ValueError naming ``devices`` when k is not in [1, number available], the sequence is
-        empty or repeats a device, or the mesh is not 1-D.
+        ValueError: naming ``devices`` when k is not in [1, number available], the sequence
+            is empty or repeats a device, or the mesh is not 1-D.
     """
     if isinstance(devices, Mesh):
         if len(devices.axis_names) != 1:

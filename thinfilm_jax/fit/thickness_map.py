@@ -367,8 +367,9 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
         includes compilation on a first call).
 
     Raises:
-        ValueError naming the argument: an image not (H, W, J), NaN/inf or negative
-        radiances, a theta_o that is not a scalar or (H, W), α ∉ (0, 1], unknown `free` names.
+        ValueError: naming the argument: an image not (H, W, J), NaN/inf or negative
+            radiances, a theta_o that is not a scalar or (H, W), α ∉ (0, 1], unknown `free`
+            names.
     """
     V.check_choice("method", method, METHODS)
     V.check_choice("observer", observer, OBSERVERS)

@@ -182,16 +182,10 @@ def test_layout_page_lists_every_module():
 # The studies pages carry the README's measured tables and sentences (copied, with their
 # captions): tests/test_readme_numbers.py's checks hold on them too, read as one text in this
 # order (each table and checked sentence once; the theory pages quote some again, unchecked).
-NUMBER_PAGES = ("studies/figure7.md", "studies/ibl.md", "studies/improved.md",
-                "studies/classic-models.md", "theory/accuracy.md", "studies/fitting.md",
-                "studies/error-runtime.md", "studies/performance.md", "how-to/devices.md",
-                "studies/scaling.md", "getting-started/conventions.md")
-
-
 def test_studies_numbers_match_artifacts():
     import test_readme_numbers as numbers
 
-    text = "\n\n".join((DOCS / p).read_text("utf-8") for p in NUMBER_PAGES)
+    text = numbers.read_document()  # the pages of `numbers.PAGES`
     mismatches = numbers.check(text)
     assert not mismatches, "docs pages disagree with figures/:\n" + "\n".join(map(str, mismatches))
     assert numbers.unchecked_tables(text) == []

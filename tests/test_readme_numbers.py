@@ -1,6 +1,8 @@
-"""Every README number that quotes a committed artifact (``figures/*``) agrees with it.
+"""Every number the documentation quotes from a committed artifact (``figures/*``) agrees with it.
 
-The contract between README.md and the artifacts:
+The checked document is the concatenation of the docs pages that quote measured numbers
+(`PAGES`, the study pages of the site; the README is short and links to them). Below,
+"README" means that document. The contract between it and the artifacts:
 
 * A README table that quotes measured numbers says where they come from in its caption (the
   paragraph above it names ``figures/<file>``), and this module holds one entry per such
@@ -27,7 +29,7 @@ The contract between README.md and the artifacts:
 From the command line (run from the repository root; the package must be importable)::
 
     PYTHONPATH=. python tests/test_readme_numbers.py          # list every mismatch
-    PYTHONPATH=. python tests/test_readme_numbers.py --fix    # rewrite README numbers
+    PYTHONPATH=. python tests/test_readme_numbers.py --fix    # rewrite the pages' numbers
 
 ``--fix`` rewrites each mismatching number in the README's own style and precision, flips
 met / missed, and replaces verbatim tables; rows that exist on one side only, patterns that
@@ -46,8 +48,26 @@ from pathlib import Path
 from typing import Any, Callable
 
 ROOT = Path(__file__).resolve().parents[1]
-README = ROOT / "README.md"
+DOCS = ROOT / "docs"
 FIGURES = ROOT / "figures"
+#: the docs pages that quote artifacts' numbers (checked as one document)
+PAGES = ("studies/figure7.md", "studies/ibl.md", "studies/improved.md",
+         "studies/classic-models.md", "theory/accuracy.md", "studies/fitting.md",
+         "studies/error-runtime.md", "studies/performance.md", "how-to/devices.md",
+         "studies/scaling.md", "getting-started/conventions.md")
+_MARK = re.compile(r"\n\n<!-- page: (\S+) -->\n\n")
+
+
+def read_document() -> str:
+    """The pages in `PAGES` as one text, each after a marker that `write_document` splits on."""
+    return "".join(f"\n\n<!-- page: {p} -->\n\n" + (DOCS / p).read_text(encoding="utf-8")
+                   for p in PAGES)
+
+
+def write_document(text: str) -> None:
+    parts = _MARK.split(text)
+    for name, body in zip(parts[1::2], parts[2::2]):
+        (DOCS / name).write_text(body, encoding="utf-8")
 
 # ------------------------------------------------------------------------------- numbers
 
@@ -747,8 +767,8 @@ NOT_CHECKED = {
 
 
 def check(text: str | None = None) -> list[Mismatch]:
-    """Every mismatch between the README (`text`, default the file) and the artifacts."""
-    text = README.read_text(encoding="utf-8") if text is None else text
+    """Every mismatch between the document (`text`, default the pages) and the artifacts."""
+    text = read_document() if text is None else text
     tables = md_tables(text)
     out: list[Mismatch] = []
     for spec in SPECS:
@@ -763,7 +783,7 @@ def check(text: str | None = None) -> list[Mismatch]:
 
 def unchecked_tables(text: str | None = None) -> list[str]:
     """Header lines of tables that cite a figures/ file in their caption but have no spec."""
-    text = README.read_text(encoding="utf-8") if text is None else text
+    text = read_document() if text is None else text
     anchors = [s.anchor for s in SPECS if hasattr(s, "anchor")] + list(NOT_CHECKED)
     return [t.header for t in md_tables(text)
             if re.search(r"figures/\w+\.(json|md)", t.caption)
@@ -787,15 +807,16 @@ def main(argv=None) -> int:
     import argparse
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--fix", action="store_true", help="rewrite README.md from the artifacts")
+    p.add_argument("--fix", action="store_true",
+                   help="rewrite the docs pages' numbers from the artifacts")
     a = p.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     if a.fix:
-        new, left = fix(README.read_text(encoding="utf-8"))
-        README.write_text(new, encoding="utf-8")
+        new, left = fix(read_document())
+        write_document(new)
         _cache.clear()
         left = check()
-        print(f"README.md rewritten; {len(left)} mismatch(es) left for a person:")
+        print(f"docs pages rewritten; {len(left)} mismatch(es) left for a person:")
         for m in left:
             print(" ", m)
         return 1 if left else 0
@@ -813,7 +834,7 @@ def main(argv=None) -> int:
 
 def test_readme_numbers_match_artifacts():
     mm = check()
-    assert not mm, "README numbers disagree with their artifacts " \
+    assert not mm, "docs numbers disagree with their artifacts " \
                    "(`python tests/test_readme_numbers.py --fix`):\n" + "\n".join(map(str, mm))
 
 
@@ -844,7 +865,7 @@ def test_number_tokens():
 def test_checker_finds_and_fixes_a_wrong_number():
     """A README with one number changed (the first row of the Figure 7 table) fails the check,
     and `fix` restores the original text."""
-    text = README.read_text(encoding="utf-8")
+    text = read_document()
     t = _find_table(md_tables(text), "| row | method | ΔE₀₀ mean |")
     cell, off = t.rows[0][2]
     tok = NUM_RE.search(cell)

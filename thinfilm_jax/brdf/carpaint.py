@@ -104,7 +104,8 @@ from . import microfacet as _mf
 from . import ndf as _ndf
 
 __all__ = ["CarPaint", "car_paint", "check_paint", "paint_colour", "paint_brightness",
-           "paint_brdf", "coat_reflectance", "coat_transmittance", "refract_in", "lobe_albedo",
+           "paint_brdf", "brightness_and_colour", "coat_reflectance", "coat_transmittance",
+           "refract_in", "lobe_albedo",
            "paint_patch_nodes", "DEFAULT_PAINT_QUADRATURE", "DEFAULT_DIFFUSE_QUADRATURE",
            "pearlescent_colour", "metallic_colour", "plain_colour", "PAINTS",
            "metallic_paint", "pearlescent_paint", "plain_paint", "AL_ETA", "AL_KAPPA"]
@@ -331,6 +332,15 @@ def _colour_jit(paint, wi, wo, n):
 @jax.jit
 def _brightness_jit(paint, wi, wo, n):
     return _brightness(paint, _frame(paint, wi, wo, n))
+
+
+@jax.jit
+def brightness_and_colour(paint, wi, wo, n):
+    """(`paint_brightness`, `paint_colour`) from one evaluation of the geometry, unchecked
+    (for quadratures that call it inside their own jitted loops, e.g. `colour_table`)."""
+    g = _frame(paint, wi, wo, n)
+    col = jnp.where(g["up"][..., None], _colour(paint.colour, g["th"], g["td"]), 0)
+    return _brightness(paint, g), col
 
 
 @jax.jit

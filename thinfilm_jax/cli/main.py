@@ -150,10 +150,11 @@ def build_parser() -> argparse.ArgumentParser:
     rd.add_argument("--envmap", action="append", metavar="PATH_OR_NAME",
                     help=f"a .hdr/.exr file or a shipped map {sorted(SHIPPED)} (repeatable; "
                          "default: the four shipped maps)")
-    rd.add_argument("--scene", action="append", choices=["fig4", "fig3", "varying"],
+    rd.add_argument("--scene", action="append", choices=["fig4", "fig3", "varying", "carpaint"],
                     help="fig4: α=0.25, d=600 nm, η₂=1.2, η₃=2.0; fig3: roughness sweep, "
-                         "η₂=1.3, η₃=2.0+0.5i, d=650 nm; varying: thickness texture "
-                         "(repeatable; default all)")
+                         "η₂=1.3, η₃=2.0+0.5i, d=650 nm; varying: thickness texture; "
+                         "carpaint: the example car paints, exact reference vs Kneiphof & "
+                         "Klein 2022's colour table (repeatable; default: fig4, fig3, varying)")
     rd.add_argument("--method", action="append",
                     choices=["reference", "mc", "ideal", "filtered", "improved", "khr"],
                     help="methods, in columns (repeatable; default reference, ideal, "

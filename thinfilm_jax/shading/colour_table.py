@@ -64,8 +64,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from ..brdf.carpaint import (CarPaint, check_paint, coat_reflectance, lobe_albedo,
-                             paint_brightness, paint_colour)
+from ..brdf.carpaint import (CarPaint, brightness_and_colour, check_paint, coat_reflectance,
+                             lobe_albedo)
 from ..brdf.microfacet import albedo
 from ..core import _validate as V
 from ..core.film import Film
@@ -231,7 +231,8 @@ def _paint_point(paint, n, wo, dirs):
     """Car paint: f_b⟨n,ω_i⟩ (the brightness through the coat, `carpaint.paint_brightness`)
     and the colour χ_j (`carpaint.paint_colour`) (chunk, N, J): diagonal in the channels."""
     ci = jnp.clip(jnp.sum(dirs * n, -1), 0.0, 1.0)
-    return paint_brightness(paint, dirs, wo, n) * ci, paint_colour(paint, dirs, wo, n)
+    fb, col = brightness_and_colour(paint, dirs, wo, n)
+    return fb * ci, col
 
 
 @functools.partial(jax.jit, static_argnames=("point", "chunk"))

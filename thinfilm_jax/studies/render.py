@@ -6,7 +6,13 @@ Scenes (SPEC §9):
 * ``fig3`` — Figure 3's roughness sweep: η₂ = 1.3, η₃ = 2.0 + 0.5i, d = 650 nm,
   α ∈ `alphas`, under the first map;
 * ``varying`` — Figures 5/6-style spatially varying thickness: a smooth thickness field
-  d(n) ∈ [250, 850] nm (sum of sines over the normal) on the ``fig4`` material, every map.
+  d(n) ∈ [250, 850] nm (sum of sines over the normal) on the ``fig4`` material, every map;
+* ``carpaint`` (not a default scene) — the example car paints (`carpaint.PAINTS`: metallic,
+  pearlescent, plain) under every map, columns `PAINT_METHODS`: the paint's exact reference
+  (`carpaint_ibl.paint_envmap_radiance`) and Kneiphof & Klein 2022's colour table
+  (`colour_table.prefilter_colour`, rank 1, the colour-table study's `PAINT_TABLE` size,
+  built per paint × map; its build time is in the column's points/s), in the default bands
+  of the paints' colour tables.
 
 Camera: orthographic, looking horizontally-down (15°) at a unit sphere, its azimuth chosen
 so that the brightest texel of the map is reflected off-centre (deterministic). Behind the
@@ -57,8 +63,14 @@ from ..shading.ibl import DEFAULT_SOURCES, REALTIME_OPTIONS, auto_subdivisions, 
 from ..shading.ibl_reference import resample_factor
 from ..shading.prefilter import prefilter_envmap
 from ..core.sharding import batch_mesh, map_sharded, to_host
+from ..brdf.carpaint import PAINTS
+from ..shading.carpaint_ibl import paint_envmap_radiance
+from ..shading.colour_table import colour_table_radiance, prefilter_colour
+from .colour_table_study import PAINT_TABLE
 
-SCENES = ("fig4", "fig3", "varying")
+SCENES = ("fig4", "fig3", "varying")  # the default scenes (films)
+ALL_SCENES = SCENES + ("carpaint",)
+PAINT_METHODS = ("reference", "colour_table")  # the columns of the car-paint scene
 METHODS = ("reference", "mc", "ideal", "filtered", "improved", "khr")  # every `ibl.METHODS` entry
 DEFAULT_METHODS = ("reference", "ideal", "filtered", "improved")
 
@@ -130,8 +142,11 @@ def scene_setups(cfg: RenderConfig):
         elif scene == "varying":
             out += [(scene, f"d(x) ∈ [250, 850] nm | {map_label(m)}", m,
                      lambda n: Film(thickness_field(n), *fig4), 0.25) for m in cfg.envmaps]
+        elif scene == "carpaint":
+            out += [(scene, f"{p} paint | {map_label(m)}", m, p, None)
+                    for m in cfg.envmaps for p in PAINTS]
         else:
-            raise ValueError(f"unknown scene {scene!r}; expected one of {SCENES}")
+            raise ValueError(f"unknown scene {scene!r}; expected one of {ALL_SCENES}")
     return out
 
 
@@ -221,10 +236,38 @@ def method_map(cache: dict, name, method: str, observer: str):
     return maps[kind]
 
 
+def render_paint(setup, cfg: RenderConfig, cache: dict):
+    """One sphere of car paint: the exact reference and the colour table (`PAINT_METHODS`)."""
+    scene, label, name, paint_name, _ = setup
+    env = method_map(cache, name, "reference", cfg.observer)
+    wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)
+    mask, n = sphere(cfg.resolution, wo, right, up)
+    pts = n[mask]
+    paint = PAINTS[paint_name]()
+    out = {"label": label, "scene": scene, "envmap": map_label(name), "alpha": None,
+           "mask": mask, "times": {}, "values": {}}
+    t0 = time.perf_counter()
+    out["values"]["reference"] = np.asarray(paint_envmap_radiance(paint, pts, wo, env))
+    out["times"]["reference"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    table = prefilter_colour(env, paint, **PAINT_TABLE)
+    out["values"]["colour_table"] = np.asarray(colour_table_radiance(table, pts, wo))
+    out["times"]["colour_table"] = time.perf_counter() - t0
+    d = (np.arange(cfg.resolution) + 0.5) / cfg.resolution * 2 - 1
+    bx, by = np.meshgrid(d, -d)
+    bg_dir = -wo + 0.6 * (bx[..., None] * right + by[..., None] * up)
+    bg_dir /= np.linalg.norm(bg_dir, axis=-1, keepdims=True)
+    out["background"] = np.asarray(lookup_bilinear(env.radiance, bg_dir))
+    out["film_thickness"] = np.zeros(int(mask.sum()))
+    return out
+
+
 def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
     """Shade one sphere with every method; the shading points are split across `devices`
     (`thinfilm_jax.core.sharding.map_sharded`: None = every device, an int k = the first k)."""
     scene, label, name, make_film, alpha = setup
+    if scene == "carpaint":
+        return render_paint(setup, cfg, cache)
     env = method_map(cache, name, "reference", cfg.observer)
     wo, right, up = camera(_view_azimuth(env), cfg.elevation_deg)
     mask, n = sphere(cfg.resolution, wo, right, up)
@@ -257,8 +300,18 @@ def _exposure(r, cfg):
     if cfg.exposure is not None:
         return cfg.exposure
     y = bands_to_xyz(r["values"]["reference" if "reference" in r["values"] else
-                              next(iter(r["values"]))], cfg.observer)[:, 1]
+                              next(iter(r["values"]))], _observer(r, cfg))[:, 1]
     return float(0.9 / max(np.percentile(y, 99), 1e-12))
+
+
+def _observer(r, cfg) -> str:
+    """The bands of a render's values: the car paints' colour tables are in the default
+    bands, the films are rendered in `cfg.observer`."""
+    return DEFAULT_OBSERVER if r["scene"] == "carpaint" else cfg.observer
+
+
+def _methods(r, cfg) -> tuple:
+    return PAINT_METHODS if r["scene"] == "carpaint" else cfg.methods
 
 
 def _image(r, vals, exposure, observer):
@@ -277,10 +330,11 @@ def summarise(results, cfg: RenderConfig) -> dict:
                "alpha": r["alpha"], "exposure": e, "points": int(r["mask"].sum()),
                "seconds": r["times"], "dE2000": {}}
         if "reference" in r["values"]:
-            for m in cfg.methods:
+            for m in _methods(r, cfg):
                 if m == "reference":
                     continue
-                de = delta_e2000(r["values"][m] * e, r["values"]["reference"] * e, cfg.observer)
+                de = delta_e2000(r["values"][m] * e, r["values"]["reference"] * e,
+                                 _observer(r, cfg))
                 row["dE2000"][m] = {"mean": float(de.mean()), "p95": float(np.percentile(de, 95)),
                                     "max": float(de.max())}
         rows.append(row)
@@ -317,27 +371,29 @@ def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    others = [m for m in cfg.methods if m != "reference"]
-    ncol = len(cfg.methods) + (len(others) if "reference" in cfg.methods else 0)
+    methods = _methods(results[0], cfg)
+    others = [m for m in methods if m != "reference"]
+    ncol = len(methods) + (len(others) if "reference" in methods else 0)
     size = (2.1 * ncol + 1.2, 2.3 * len(results) + 0.7)
     fig, axes = plt.subplots(len(results), ncol, figsize=size, squeeze=False,
                              layout="constrained")
     im = None
     for i, r in enumerate(results):
         e = _exposure(r, cfg)
-        for j, m in enumerate(cfg.methods):
+        obs = _observer(r, cfg)
+        for j, m in enumerate(methods):
             ax = axes[i, j]
-            ax.imshow(_image(r, r["values"][m], e, cfg.observer))
+            ax.imshow(_image(r, r["values"][m], e, obs))
             pts = r["mask"].sum() / r["times"][m]
-            kind = "incl. compile" if m in ("reference", "mc") else "warm"
+            kind = ("incl. compile" if m in ("reference", "mc") else
+                    "incl. the table's build" if m == "colour_table" else "warm")
             ax.set_title(f"{m}\n{pts:,.0f} points/s ({kind})", fontsize=7)
             if j == 0:
                 ax.set_ylabel(r["label"].replace(" | ", "\n"), fontsize=7)
-        for j, m in enumerate(others if "reference" in cfg.methods else []):
-            ax = axes[i, len(cfg.methods) + j]
+        for j, m in enumerate(others if "reference" in methods else []):
+            ax = axes[i, len(methods) + j]
             de = np.full(r["mask"].shape, np.nan)
-            de[r["mask"]] = delta_e2000(r["values"][m] * e, r["values"]["reference"] * e,
-                                        cfg.observer)
+            de[r["mask"]] = delta_e2000(r["values"][m] * e, r["values"]["reference"] * e, obs)
             im = ax.imshow(de, cmap="magma", vmin=0, vmax=20)
             ax.set_title(f"ΔE₀₀ {m}\nmean {np.nanmean(de):.2f}, "
                          f"p95 {np.nanpercentile(de, 95):.2f}", fontsize=8)
@@ -357,6 +413,9 @@ TITLES = {
     "fig3": "Figure 3 roughness sweep: η₂ = 1.3 on η₃ = 2.0 + 0.5i, d = 650 nm; exposure per row",
     "varying": "Spatially varying thickness d ∈ [250, 850] nm (Figures 5/6 style), η₂ = 1.2 "
                "on η₃ = 2.0, α = 0.25; exposure per row",
+    "carpaint": "Car paints (brdf/carpaint.py PAINTS: GGX lobes × colour table under a clear "
+                "coat η_c = 1.5): exact reference vs Kneiphof & Klein 2022's colour table "
+                "(rank 1, 8 × 16 × 8 views); the default (Stiles & Burch 10°) bands; exposure per row",
 }
 
 

@@ -94,7 +94,7 @@ def test_no_import_cycle_between_modules():
 
 def test_release_metadata_agrees():
     """One version everywhere: pyproject, `thinfilm_jax.__version__` (what `--version`
-    prints), CITATION.cff, and the newest CHANGELOG.md entry."""
+    prints), CITATION.cff, and the newest released CHANGELOG.md entry (after "Unreleased")."""
     import tomllib
 
     import thinfilm_jax
@@ -103,7 +103,7 @@ def test_release_metadata_agrees():
     assert thinfilm_jax.__version__ == version
     assert re.search(rf"^version: {re.escape(version)}$", (ROOT / "CITATION.cff").read_text("utf-8"),
                      flags=re.M)
-    first = re.search(r"^## (\S+)", (ROOT / "CHANGELOG.md").read_text("utf-8"), flags=re.M)
+    first = re.search(r"^## (\d\S*)", (ROOT / "CHANGELOG.md").read_text("utf-8"), flags=re.M)
     assert first and first.group(1) == version
 
 

@@ -67,6 +67,20 @@ def load_package(path, alias: str = "thinfilm_jax_baseline"):
     return mod
 
 
+def _module(pkg, *names):
+    """The first of `names` (dotted, under `pkg`) that exists: the layered path of this
+    package (``realtime.kernels``) or the flat one of an older checkout (``kernels``);
+    None when none does."""
+    for name in names:
+        full = f"{pkg.__name__}.{name}"
+        try:
+            if importlib.util.find_spec(full) is not None:
+                return importlib.import_module(full)
+        except ModuleNotFoundError:  # a parent package that this checkout lacks
+            continue
+    return None
+
+
 def _commit(path) -> str | None:
     try:
         return subprocess.run(["git", "-C", str(path), "rev-parse", "--short", "HEAD"],
@@ -97,9 +111,9 @@ def shading_points(n: int, seed: int = 0):
 
 def programs(pkg, pts, pref_np, envmap: bool = True):
     """{kernel name: (jitted callable, args)} of package `pkg` (this one or a baseline)."""
-    K = importlib.import_module(pkg.__name__ + ".kernels")
-    I = importlib.import_module(pkg.__name__ + ".improved")  # noqa: E741
-    L = importlib.import_module(pkg.__name__ + ".lut")
+    K = _module(pkg, "realtime.kernels", "kernels")
+    I = _module(pkg, "realtime.improved", "improved")  # noqa: E741
+    L = _module(pkg, "spectral.lut", "lut")
     film = pkg.Film(*pts["film"])
     lut = L.build_shat_lut(dtype=F32)
     tab = I.bin_table(dtype=F32)
@@ -112,8 +126,8 @@ def programs(pkg, pts, pref_np, envmap: bool = True):
             f, c, a, tb, shat="lut", lut=lt)), (film, pts["cos_o"], pts["alpha"], tab, lut)),
     }
     if envmap:
-        P = importlib.import_module(pkg.__name__ + ".prefilter")
-        ibl = importlib.import_module(pkg.__name__ + ".ibl")
+        P = _module(pkg, "shading.prefilter", "prefilter")
+        ibl = _module(pkg, "shading.ibl", "ibl")
         pref = P.PrefilteredEnvMap(*(jnp.asarray(x, F32) for x in pref_np[:4]),
                                    L.ShatLUT(*pref_np[4]))
         for method in ("ideal", "filtered", "improved"):
@@ -121,8 +135,8 @@ def programs(pkg, pts, pref_np, envmap: bool = True):
                 jax.jit(lambda f, a, n, v, p, m=method: ibl.envmap_radiance(
                     f, a, n, v, p, method=m)),
                 (film, pts["alpha"], pts["normal"], pts["wo"], pref))
-        if importlib.util.find_spec(pkg.__name__ + ".sources") is not None:
-            S = importlib.import_module(pkg.__name__ + ".sources")
+        S = _module(pkg, "shading.sources", "sources")
+        if S is not None:
             sun = S.Sources(jnp.asarray([[0.6, 0.0, 0.8]], F32), jnp.asarray([6e-5], F32),
                             jnp.asarray([[5e4, 4.6e4, 4.1e4]], F32))  # one 0.5° sun
             sun = S.with_film_tables(sun, "stiles_burch_1959_10", F32).astype(F32)

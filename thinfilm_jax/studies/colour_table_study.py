@@ -209,7 +209,7 @@ def markdown(result) -> str:
     cols = ["colour_table", "colour_table_rank2", "colour_table_3d", "ceiling",
             "colour_table+improved_brightness", "ceiling+improved_brightness", "filtered",
             "improved"]
-    lines = ["| map | film | " + " | ".join(cols) + " |",
+    lines = ["| map | material | " + " | ".join(cols) + " |",
              "|---|---|" + "---|" * len(cols)]
     for r in result["rows"]:
         e = r["errors"]
@@ -217,7 +217,7 @@ def markdown(result) -> str:
             f"{e[c]['dE2000_mean']:.2f} / {e[c]['dE2000_p95']:.2f}" if c in e else "–"
             for c in cols) + " |")
     lines += ["", "CIEDE2000 mean / p95 against the exact reference (module docstring).", "",
-              "| map | film | build (s) | rank-1 decomposition error | table + brightness (kB) | "
+              "| map | material | build (s) | rank-1 decomposition error | table + brightness (kB) | "
               "prefiltered map (kB) | colour_table (ns/pt) | filtered (ns/pt) | "
               "improved (ns/pt) |", "|---|---|---|---|---|---|---|---|---|"]
     for r in result["rows"]:

@@ -413,9 +413,9 @@ TITLES = {
     "fig3": "Figure 3 roughness sweep: η₂ = 1.3 on η₃ = 2.0 + 0.5i, d = 650 nm; exposure per row",
     "varying": "Spatially varying thickness d ∈ [250, 850] nm (Figures 5/6 style), η₂ = 1.2 "
                "on η₃ = 2.0, α = 0.25; exposure per row",
-    "carpaint": "Car paints (brdf/carpaint.py PAINTS: GGX lobes × colour table under a clear "
-                "coat η_c = 1.5): exact reference vs Kneiphof & Klein 2022's colour table "
-                "(rank 1, 8 × 16 × 8 views); the default (Stiles & Burch 10°) bands; exposure per row",
+    "carpaint": "Car paints (brdf/carpaint.py PAINTS: GGX lobes × colour table,\nclear coat "
+                "η_c = 1.5): exact reference vs Kneiphof & Klein 2022's colour table\n(rank 1, "
+                "8 × 16 × 8 views); Stiles & Burch 10° bands; exposure per row",
 }
 
 

@@ -19,6 +19,14 @@ much as a bright one). Shading is the split-sum brightness times the table:
 $$ L_j(n, \omega_o) = A(\theta_o, \alpha)\,\sum_k C_{jk}(\omega_r, \theta_o)\,
    P_k(\omega_r, \alpha) \qquad (\text{K 9 for } A\,P). $$
 
+A car paint (`brdf.carpaint.CarPaint`, the AxF CPA2 form) is already written this way: f_b is
+its Lambert term and GGX lobes seen through the coat, χ_j(θ_h, θ_d) its colour table (one
+channel per band, no cross bands). Its brightness is a sum of terms, each an albedo row
+A_b(θ_o) times a prefiltered map: every lobe the map at min(1, η_c α_l) read at ω_r (a lobe
+refracted out of the coat is η_c times wider near normal view), the Lambert term the
+cosine-filtered map read at n, and the coat's mirror F(θ_o) times the box-filtered map at ω_r,
+added uncoloured (`ColourTable.terms`).
+
 The table is stored as K&K 2022 do, decomposed into a function of ω_r (their low-resolution
 cubemap; here an equirect map of the same role) times a function of θ_o (their 2D array:
 θ_o × channel), per channel the best rank-1 approximation (truncated SVD); `rank` r > 1 keeps
@@ -27,9 +35,9 @@ r terms, r = full reproduces the 3D table (also kept, `ColourTable.full`, for `r
 Quadrature of the table (host, once per material and map): every texel of the map (box-
 filtered with `envmap.downsample` while its texels stay ≤ α/4, as `prefilter`), s × s
 Gauss–Legendre nodes per texel (`subdivisions`), `n_azimuth` uniform ψ nodes (the integrand
-is periodic in ψ: the trapezoid rule converges geometrically), view nodes u = √cos θ_o = 1/n, 2/n, …, 1
-(n = `n_view`) (the grid of `prefilter.albedo_table`), R_jk(c) exact
-spectral on `n_cos` nodes of c, interpolated. A(θ_o, α) is the exact `microfacet.albedo` at
+is periodic in ψ: the trapezoid rule converges geometrically), view nodes
+u = √cos θ_o = 1/n, 2/n, …, 1 (n = `n_view`; the variable of `prefilter.albedo_table`), R_jk(c)
+exact spectral on `n_cos` nodes of c, interpolated. A(θ_o, α) is the exact `microfacet.albedo` at
 the material's α on 64 nodes of √cos θ_o; P(ω_r, α) is the map prefiltered at exactly α
 (`prefilter._filter_level`). Measured errors (tests/shading/test_colour_table.py): the
 decomposition's own error (`decomposition_error`), convergence under refinement, and the

@@ -100,6 +100,8 @@ from ..optics.fresnel import fresnel_schlick, safe_sqrt
 from ..spectral.reflectance import bare_bands, rgb_reflectance
 from ..spectral.spectra import DEFAULT_OBSERVER
 from . import masking as _masking
+from .material import check_direction
+from .microfacet import composite_gauss_legendre
 from . import microfacet as _mf
 from . import ndf as _ndf
 
@@ -116,8 +118,6 @@ DEFAULT_PAINT_QUADRATURE = (64, 64)
 DEFAULT_DIFFUSE_QUADRATURE = (32, 32)
 #: aluminium at 550 nm (Rakić 1995, Appl. Opt. 34, 4755; refractiveindex.info)
 AL_ETA, AL_KAPPA = 0.96, 6.69
-#: unit-direction tolerance of the direction arguments (as `material.brdf_value`)
-UNIT_TOL = 1e-6
 
 
 class CarPaint(NamedTuple):
@@ -189,22 +189,9 @@ def car_paint(diffuse, lobe_weight, lobe_alpha, lobe_f0, colour, coat_ior=1.5) -
     return check_paint(CarPaint(**out))
 
 
-def _check_direction(name, v):
-    v = V.check_finite(name, v)
-    if np.ndim(v) < 1 or np.shape(v)[-1] != 3:
-        raise ValueError(f"{name} must have shape (..., 3); got {np.shape(v)}")
-    if V.is_concrete(v):
-        norm = np.linalg.norm(np.asarray(v, float), axis=-1)
-        if np.any(np.abs(norm - 1) > UNIT_TOL):
-            bad = norm[np.abs(norm - 1) > UNIT_TOL].flat[0]
-            raise ValueError(f"{name} must be a unit vector (|‖{name}‖ − 1| ≤ {UNIT_TOL}); got "
-                             f"norm {bad!r}")
-    return v
-
-
 def _directions(paint, wi, wo, n):
     check_paint(paint)
-    wi, wo, n = (_check_direction(k, v) for k, v in (("wi", wi), ("wo", wo), ("n", n)))
+    wi, wo, n = (check_direction(k, v) for k, v in (("wi", wi), ("wo", wo), ("n", n)))
     V.check_broadcast([("wi", wi), ("wo", wo), ("n", n)])
     dt = _leaf_dtype(wi, wo, n, paint.coat_ior)
     paint = CarPaint(*(jnp.asarray(x, dt) for x in paint))
@@ -401,17 +388,6 @@ def _cone_rule(co, so, alpha, c_min, n_u, n_phi):
     return c.reshape(-1), weight.reshape(-1), wi.reshape(-1, 3)
 
 
-@functools.lru_cache(maxsize=None)
-def _gl_panels(n):
-    """Composite Gauss–Legendre on [0, 1]: ⌈n/8⌉ panels of ≤ 8 nodes (host float64)."""
-    order = min(n, 8)
-    panels = max(1, -(-n // order))
-    x, w = np.polynomial.legendre.leggauss(order)
-    x, w = (x + 1) / 2, w / 2
-    a = np.arange(panels)[:, None]
-    return ((a + x[None]) / panels).reshape(-1), np.tile(w / panels, panels)
-
-
 def _nodes_one(paint, cos_o, orders):
     """Nodes of one view (module docstring), frame n = z, ω_o = (sin θ_o, 0, cos θ_o)."""
     n_u, n_phi, n_c, n_pd = orders
@@ -438,8 +414,8 @@ def _nodes_one(paint, cos_o, orders):
 
     wl, wt = jax.vmap(lobe)(paint.lobe_alpha, paint.lobe_weight, paint.lobe_f0)
     # Lambert: c = cos θ_i ∈ [0, 1] × φ ∈ [0, π] (doubled), weight a/π T_i T_o/η² c dc dφ
-    xc, wc = (jnp.asarray(a, dt) for a in _gl_panels(n_c))
-    xp, wp = (jnp.asarray(a, dt) for a in _gl_panels(n_pd))
+    xc, wc = (jnp.asarray(a, dt) for a in composite_gauss_legendre(n_c))
+    xp, wp = (jnp.asarray(a, dt) for a in composite_gauss_legendre(n_pd))
     phi = np.pi * xp
     ct_i, f_i = _coat(xc, eta)
     sc = safe_sqrt((1 - xc) * (1 + xc))
@@ -461,6 +437,15 @@ def _orders(quadrature, diffuse_quadrature):
     return n_u, n_phi, n_c, n_pd
 
 
+def _quadrature_args(paint, cos_o, quadrature, diffuse_quadrature):
+    """Checked (paint, cos θ_o, orders) in one floating dtype for the quadratures below."""
+    check_paint(paint)
+    cos_o = V.check_range("cos_o", cos_o, -1.0, 1.0, ulps=V.ROUNDING_ULPS, clamp=True)
+    orders = _orders(quadrature, diffuse_quadrature)
+    dt = _leaf_dtype(cos_o, paint.coat_ior)
+    return CarPaint(*(jnp.asarray(x, dt) for x in paint)), jnp.asarray(cos_o, dt), orders
+
+
 def paint_patch_nodes(paint: CarPaint, cos_o, *, quadrature=DEFAULT_PAINT_QUADRATURE,
                       diffuse_quadrature=DEFAULT_DIFFUSE_QUADRATURE):
     """Quadrature of ∫ f(ω_i, ω_o) g(ω_i) cos θ_i dω_i for the paint's brightness, frame n = z,
@@ -473,12 +458,7 @@ def paint_patch_nodes(paint: CarPaint, cos_o, *, quadrature=DEFAULT_PAINT_QUADRA
     quadrature = (n_u, n_φ) of each lobe's half-vector rule (N = n_u n_φ);
     diffuse_quadrature = (n_c, n_φ) of the Lambert term's product rule (M = n_c n_φ).
     """
-    check_paint(paint)
-    cos_o = V.check_range("cos_o", cos_o, -1.0, 1.0, ulps=V.ROUNDING_ULPS, clamp=True)
-    orders = _orders(quadrature, diffuse_quadrature)
-    dt = _leaf_dtype(cos_o, paint.coat_ior)
-    paint = CarPaint(*(jnp.asarray(x, dt) for x in paint))
-    c = jnp.asarray(cos_o, dt)
+    paint, c, orders = _quadrature_args(paint, cos_o, quadrature, diffuse_quadrature)
     out = _nodes_jit(paint, c.reshape(-1), orders)
     return tuple(o.reshape(c.shape + o.shape[1:]) for o in out)
 
@@ -502,12 +482,7 @@ def lobe_albedo(paint: CarPaint, cos_o, *, quadrature=DEFAULT_PAINT_QUADRATURE,
     brute-force rule over the outside ω_i to 1e-15 (α = 0.15, 0.3) and with (256, 256) to
     ≤ 4e-11 for α ≥ 0.05, θ_o ≤ 1.55, coat or none; 1.4e-8 at α = 0.01 (against (512, 512)).
     """
-    check_paint(paint)
-    cos_o = V.check_range("cos_o", cos_o, -1.0, 1.0, ulps=V.ROUNDING_ULPS, clamp=True)
-    orders = _orders(quadrature, diffuse_quadrature)
-    dt = _leaf_dtype(cos_o, paint.coat_ior)
-    paint = CarPaint(*(jnp.asarray(x, dt) for x in paint))
-    c = jnp.asarray(cos_o, dt)
+    paint, c, orders = _quadrature_args(paint, cos_o, quadrature, diffuse_quadrature)
     out = _albedo_jit(paint, c.reshape(-1), orders)
     return out.reshape(c.shape + out.shape[1:])
 

@@ -183,7 +183,8 @@ def _check_diffuse(d):
     return d
 
 
-def _check_direction(name, v):
+def check_direction(name, v):
+    """`v` (..., 3) checked: finite, and unit vectors (to `UNIT_TOL`) where concrete."""
     v = V.check_finite(name, v)
     if np.ndim(v) < 1 or np.shape(v)[-1] != 3:
         raise ValueError(f"{name} must have shape (..., 3); got {np.shape(v)}")
@@ -408,7 +409,7 @@ def brdf_value(material: Material, wi, wo, n, t=None):
     upper hemisphere, h = n included).
     """
     check_material(material)
-    wi, wo, n = (_check_direction(k, v) for k, v in (("wi", wi), ("wo", wo), ("n", n)))
+    wi, wo, n = (check_direction(k, v) for k, v in (("wi", wi), ("wo", wo), ("n", n)))
     shapes = [("wi", wi), ("wo", wo), ("n", n)]
     if material.specular.ndf in ANISOTROPIC_NDFS:
         if t is None:
@@ -417,7 +418,7 @@ def brdf_value(material: Material, wi, wo, n, t=None):
     else:
         t = None
     if t is not None:
-        t = _check_direction("t", t)
+        t = check_direction("t", t)
         shapes.append(("t", t))
         if V.is_concrete(t) and V.is_concrete(n):
             dots = np.abs(np.sum(np.asarray(t, float) * np.asarray(n, float), axis=-1))

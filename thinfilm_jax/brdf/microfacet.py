@@ -196,6 +196,18 @@ def _gl01(n):
 
 
 @functools.lru_cache(maxsize=None)
+def composite_gauss_legendre(n: int):
+    """Composite Gauss–Legendre on [0, 1]: ⌈n/8⌉ equal panels of min(n, 8) nodes; (nodes,
+    weights), host float64."""
+    order = min(n, 8)
+    panels = max(1, -(-n // order))
+    x, w = np.polynomial.legendre.leggauss(order)
+    x, w = (x + 1) / 2, w / 2
+    a = np.arange(panels)[:, None]
+    return ((a + x[None]) / panels).reshape(-1), np.tile(w / panels, panels)
+
+
+@functools.lru_cache(maxsize=None)
 def _phi_rule(n):
     """Azimuth rule on (0, π) as (cos φ_h, sin φ_h, weight/π), split at φ_h = π/2.
 

@@ -289,6 +289,22 @@ def _source_map(env: EnvMap, alpha: float, subdivisions: int | None):
     return src, h, w, s
 
 
+def _integrand(material, alpha: float, env: EnvMap, subdivisions, observer, n_cos, dt):
+    """(point function, its material data, node directions, weights, node radiance): what
+    `_config_sums` integrates for a `Film` (its R_jk table at `alpha`) or a `CarPaint`."""
+    src, sh, sw, s = _source_map(env, alpha, subdivisions)
+    d, wgt, idx = texel_nodes(sh, sw, s)
+    light = jnp.asarray(np.asarray(src.radiance, np.float64).reshape(-1, 3)[idx], dt)
+    if isinstance(material, CarPaint):
+        point, mat = _paint_point, CarPaint(*(jnp.asarray(x, dt) for x in material))
+    else:
+        film = Film(*(jnp.asarray(x, dt) for x in material))
+        r_tab = _r_table(film, cross_band_name(observer), n_cos,
+                         choose_arithmetic(film, "auto"), dt)
+        point, mat = _film_point, (jnp.asarray(alpha, dt), r_tab)
+    return point, mat, jnp.asarray(d, dt), jnp.asarray(wgt, dt), light
+
+
 def decompose(full, rank: int | None):
     """Per channel the truncated SVD of the (h·w) × n_view matrix: U·S (h, w, r, C) and
     V (n_view, r, C); rank None or ≥ n_view keeps every term (exact)."""
@@ -377,22 +393,13 @@ def prefilter_colour(envmap, material, alpha=None, *, observer: str = DEFAULT_OB
                          f"map's {env.shape}")
     start = time.perf_counter()
     f64 = jnp.result_type(float)  # float64 where enabled (the reference precision)
-    src, sh, sw, s = _source_map(env, a_min, subdivisions)
-    d, wgt, idx = texel_nodes(sh, sw, s)
-    light = jnp.asarray(np.asarray(src.radiance, np.float64).reshape(-1, 3)[idx], f64)
-    if paint:
-        point, mat = _paint_point, CarPaint(*(jnp.asarray(x, f64) for x in material))
-    else:
-        film = Film(*(jnp.asarray(x, f64) for x in key[1:6]))
-        r_tab = _r_table(film, cross_band_name(observer), n_cos,
-                         choose_arithmetic(film, "auto"), f64)
-        point, mat = _film_point, (jnp.asarray(a_min, f64), r_tab)
+    point, mat, d, wgt, light = _integrand(material if paint else Film(*key[1:6]), a_min,
+                                           env, subdivisions, observer, n_cos, f64)
     omega_r = jnp.asarray(texel_centers(h, w).reshape(-1, 3), f64)
     u = view_nodes(n_view)
     n, wo = configurations(omega_r, u * u, n_azimuth)
     flat = lambda x: x.reshape(-1, 3)  # noqa: E731
-    sums = [_config_sums(point, mat, flat(n), flat(wo), jnp.asarray(d, f64),
-                         jnp.asarray(wgt, f64), lt, chunk)
+    sums = [_config_sums(point, mat, flat(n), flat(wo), d, wgt, lt, chunk)
             for lt in (light, jnp.ones_like(light))]
     shape = (h, w, n_view, n_azimuth)
     (den, num), (den1, num1) = [tuple(x.reshape(shape + x.shape[-1:]).sum(3) for x in p)
@@ -564,20 +571,12 @@ def exact_colour_radiance(material, alpha, normal, view, envmap, table: ColourTa
     f64 = jnp.result_type(float)
     paint = isinstance(material, CarPaint)
     a_min = (float(np.min(np.asarray(material.lobe_alpha))) if paint else float(alpha))
-    src, sh, sw, s = _source_map(env, a_min, subdivisions)
-    d, wgt, idx = texel_nodes(sh, sw, s)
-    light = jnp.asarray(np.asarray(src.radiance, np.float64).reshape(-1, 3)[idx], f64)
-    if paint:
-        point, mat = _paint_point, CarPaint(*(jnp.asarray(x, f64) for x in material))
-    else:
-        film = Film(*(jnp.asarray(x, f64) for x in material))
-        r_tab = _r_table(film, cross_band_name(observer), n_cos,
-                         choose_arithmetic(film, "auto"), f64)
-        point, mat = _film_point, (jnp.asarray(a_min, f64), r_tab)
+    point, mat, d, wgt, light = _integrand(material, a_min, env, subdivisions, observer,
+                                           n_cos, f64)
     normal, view, up, co, refl = _geometry(jnp.asarray(normal).reshape(-1, 3),
                                            jnp.asarray(view).reshape(-1, 3), f64)
-    sums = [_config_sums(point, mat, normal, jnp.where(up[:, None], view, normal),
-                         jnp.asarray(d, f64), jnp.asarray(wgt, f64), lt, chunk)
+    sums = [_config_sums(point, mat, normal, jnp.where(up[:, None], view, normal), d, wgt,
+                         lt, chunk)
             for lt in (light, jnp.ones_like(light))]
     (den, num), (den1, num1) = sums
     c = _ratio(num, den, num1, den1, not paint)

@@ -57,7 +57,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..brdf import material as M
-from ..brdf.microfacet import DEFAULT_QUADRATURE, _patch_quadrature, brdf_no_fresnel, view_direction
+from ..brdf.microfacet import (DEFAULT_QUADRATURE, _patch_quadrature, brdf_no_fresnel,
+                               composite_gauss_legendre, view_direction)
 from ..brdf.ndf import walter_alpha
 from ..core import _validate as V
 from ..spectral.spectra import get_observer
@@ -95,26 +96,15 @@ def _proxy(s: M.Specular, dtype):
     return s.ndf, jnp.asarray(s.shape_x, dtype)
 
 
-@functools.lru_cache(maxsize=None)
-def _composite(n: int):
-    """Composite Gauss–Legendre on [0, 1]: ⌈n/8⌉ equal panels of min(n, 8) nodes (host)."""
-    order = min(n, 8)
-    panels = max(1, -(-n // order))
-    x, w = np.polynomial.legendre.leggauss(order)
-    x, w = (x + 1) / 2, w / 2
-    a = np.arange(panels)[:, None]
-    return ((a + x[None]) / panels).reshape(-1), np.tile(w / panels, panels)
-
-
 def sphere_rule(theta_o, n_theta: int, n_phi: int):
     """ω_i nodes (N, 3) and weights dω (N,) over the upper hemisphere, φ_i from the +x azimuth
     (the view's), split at θ_o and at the quadrants (module docstring). Traceable in θ_o."""
-    x, w = (jnp.asarray(a) for a in _composite(max(n_theta // 2, 1)))
+    x, w = (jnp.asarray(a) for a in composite_gauss_legendre(max(n_theta // 2, 1)))
     theta_o = jnp.asarray(theta_o)
     lo, hi = theta_o, jnp.pi / 2 - theta_o
     th = jnp.concatenate([lo * x, theta_o + hi * x])
     wth = jnp.concatenate([lo * w, hi * w]) * jnp.sin(th)
-    xp, wp = _composite(max(n_phi // 4, 1))
+    xp, wp = composite_gauss_legendre(max(n_phi // 4, 1))
     ph = np.concatenate([(q + xp) * np.pi / 2 for q in range(4)])
     wph = np.tile(wp * np.pi / 2, 4)
     st = jnp.sin(th)[:, None]

@@ -158,19 +158,30 @@ def _local_frame(n):
     return t, bt
 
 
-def _lobe_cos_weight(wi, n, wo, alpha):
-    """(ρ̃ ⟨n,ω_i⟩ (…), c = ⟨h, ω_i⟩) for world directions; 0 below either horizon."""
+def _lobe_terms(wi, n, wo, alpha):
+    """The GGX factors of ω_i (…, 3) for the world normal n and view ω_o: (ρ̃⟨n,ω_i⟩,
+    c = ⟨h,ω_i⟩ clipped to [0, 1], ⟨n,ω_i⟩, ⟨n,h⟩ (0 where h is undefined), D(⟨n,h⟩),
+    ⟨n,ω_o⟩ (1 below the horizon), whether h is defined); ρ̃⟨n,ω_i⟩ is 0 below either
+    horizon. One formula for every node of the reference, the scores of its adaptive rule
+    included."""
     ci = jnp.sum(wi * n, -1)
     co = jnp.sum(wo * n, -1)
     hs = wi + wo
-    up = (ci > 0) & (co > 0)  # then ω_i ≠ −ω_o and |ω_i + ω_o| > 0
-    hn = jnp.sqrt(jnp.where(up, jnp.sum(hs * hs, -1), 1.0))
-    ch = jnp.sum(hs * n, -1) / hn
-    c = jnp.sum(hs * wi, -1) / hn
-    cis = jnp.where(up, ci, 1.0)
-    cos_ = jnp.where(up, co, 1.0)
-    f = normal_distribution(ch, alpha) * smith_g2(cis, cos_, alpha) / (4 * cos_)
-    return jnp.where(up, f, 0.0), jnp.clip(c, 0.0, 1.0)
+    hn2 = jnp.sum(hs * hs, -1)
+    okh = (hn2 > 1e-12) & (co > 0)  # ω_i ≠ −ω_o: |ω_i + ω_o| > 0
+    hn = jnp.sqrt(jnp.where(okh, hn2, 1.0))
+    ch = jnp.where(okh, jnp.sum(hs * n, -1) / hn, 0.0)
+    c = jnp.clip(jnp.sum(hs * wi, -1) / hn, 0.0, 1.0)
+    cos_ = jnp.where(co > 0, co, 1.0)
+    dist = normal_distribution(ch, alpha)
+    up = (ci > 0) & okh
+    f = jnp.where(up, dist * smith_g2(jnp.where(up, ci, 1.0), cos_, alpha) / (4 * cos_), 0.0)
+    return f, c, ci, ch, dist, cos_, okh
+
+
+def _lobe_cos_weight(wi, n, wo, alpha):
+    """(ρ̃ ⟨n,ω_i⟩ (…), c = ⟨h, ω_i⟩) for world directions; 0 below either horizon."""
+    return _lobe_terms(wi, n, wo, alpha)[:2]
 
 
 def _r_table(film, observer, n_cos, arithmetic, dtype):
@@ -335,98 +346,169 @@ def block_light(radiance, b: int):
     return wts, eff
 
 
+@functools.lru_cache(maxsize=8)
+def block_interpolant(h: int, w: int, b: int):
+    """The texel rule of a block (module docstring, level 2): g is interpolated by the
+    tensor-product Lagrange polynomial through its b × b texel centres, whose integral
+    against the piecewise-constant light is exact. Returns (host float64)
+    A (h, b) = ∫_(row r) ℓ_i(θ) sin θ dθ and B (w, b) = ∫_(col c) ℓ_j(φ) dφ, ℓ_i the Lagrange
+    basis on the centres of the rows (columns) of r's (c's) block, so that the rule's value
+    of texel t is c_t Σ_ij g_ij A[r_t, i] B[c_t, j] (Gauss–Legendre, 8 nodes per texel:
+    exact to rounding for these entire integrands)."""
+    gx, gw = np.polynomial.legendre.leggauss(8)
+    x = np.arange(b)[:, None] + (gx[None] + 1) / 2  # (b, 8) local positions in texel units
+    nodes = np.arange(b) + 0.5
+    lag = np.ones((b, 8, b))
+    for i in range(b):
+        for m in range(b):
+            if m != i:
+                lag[..., i] *= (x - nodes[m]) / (nodes[i] - nodes[m])
+    dth, dph = np.pi / h, 2 * np.pi / w
+    theta = (np.arange(h) // b * b)[:, None] * dth + np.tile(x, (h // b, 1)) * dth  # (h, 8)
+    a = np.einsum("rg,rgi->ri", gw[None] / 2 * dth * np.sin(theta), np.tile(lag, (h // b, 1, 1)))
+    bm = np.tile(np.einsum("g,rgj->rj", gw / 2 * dph, lag), (w // b, 1))
+    return a, bm
+
+
+def interpolant_light(radiance, b: int):
+    """Per block the weights (T_B+1, b², 3) of its texel rule: Σ_(t∈B) c_t,k A[r_t, i]
+    B[c_t, j] (`block_interpolant`), so that the rule's value of block B is
+    Σ_ij g_ij · weights[B, ij] (the pad block's weights are 0)."""
+    h, w = radiance.shape[:2]
+    a, bm = block_interpolant(h, w, b)
+    dtype = radiance.dtype
+    c = radiance.reshape(h // b, b, w // b, b, 3)
+    wts = jnp.einsum("IrJck,Iri,Jcj->IJijk", c, jnp.asarray(a, dtype).reshape(h // b, b, b),
+                     jnp.asarray(bm, dtype).reshape(w // b, b, b), precision=HIGHEST)
+    wts = wts.reshape(-1, b * b, 3)
+    return jnp.concatenate([wts, jnp.zeros((1, b * b, 3), dtype)])
+
+
 def block_size(h: int, w: int) -> int:
     """Texels per block side: 4 where the grid allows (h, w/2 divisible), else 2, else 1."""
     return next(b for b in (4, 2, 1) if h % b == 0 and w % (2 * b) == 0)
 
 
-def refine_blocks(blocks: int, b: int, s: int) -> int:
-    """Blocks refined per point: 256 (at most all of them; none where a block is one texel
-    and has no sub-texel nodes). Measured on the shipped sunset and mountain maps, 24 points
-    a third of them grazing, against the exhaustive rule (largest band error / band maximum):
-    K = 128, 192, 256, 384 give 1.7e-4, 7.5e-5, 5.5e-5, 2.2e-5 at α = 0.6 (the horizon band
-    dominates), 1.0e-4, 5.9e-5, 3.8e-5, 2.3e-5 at α = 0.25 and 4.6e-5, 2.0e-5, 1.8e-5,
-    4.2e-6 at α = 0.05 (the lobe's core)."""
-    if s <= 1 and b == 1:
-        return 0
-    return int(min(blocks, 256))
+def refine_counts(blocks: int, b: int, s: int) -> tuple[int, int]:
+    """(K, K₃) of the adaptive rule: the blocks integrated again by the texel rule, and the
+    texels among theirs (among all blocks where a block is one texel) integrated with s × s
+    sub-nodes, per point: K = 128, K₃ = 64 s² (at most all of them; no sub-texel level where
+    s = 1, since one node per texel is coarser than the texel rule). MEASURED"""
+    if s <= 1:
+        return (0, 0) if b == 1 else (int(min(blocks, 128)), 0)
+    k = int(min(blocks, 128)) if b > 1 else 0
+    return k, int(min(k * b * b if b > 1 else blocks, 64 * s * s))
+
+
+def _peak_weight(terms, a, sin_r):
+    """ρ̃⟨n,ω⟩ at a region's most-lit point: ⟨n,ω⟩ raised by its half-diagonal sin r."""
+    _, _, ci, _, dist, cos_, okh = terms
+    return jnp.where(okh, dist * smith_g2(jnp.maximum(ci, sin_r), cos_, a) / (4 * cos_), 0.0)
+
+
+def _score(terms, a, sin_r, size, ws, ws_nb):
+    """The adaptive rule's error score of a block or texel (module docstring): its peak
+    weight `ws` × min(1, (Δ/ℓ)³); near the horizon (a kink of g) (Δ/ℓ)³ ≥ 1/8 and the
+    weight is the largest of its 3 × 3 neighbourhood's, `ws_nb` (the stencil reaches
+    across the kink)."""
+    _, c, ci, ch, _, _, _ = terms
+    chc = jnp.clip(ch, 0.0, 1.0)
+    ell = 2 * jnp.maximum(c, 1e-3) * jnp.sqrt(a * a * chc**4 + (1 - chc**2) * chc**2 + 1e-30)
+    ratio = jnp.minimum((size / ell) ** 3, 1.0)  # an unresolved region: its whole value
+    horizon = ci < 2 * sin_r
+    ratio = jnp.where(horizon, jnp.maximum(ratio, 0.125), ratio)
+    return jnp.where(horizon, jnp.maximum(ws, ws_nb), ws) * ratio
+
+
+def _top(score, k):
+    """The k best-scored regions (`_select`; padded entries have score 0) and their scores."""
+    score = jax.lax.stop_gradient(score)
+    t = _select(score, k).astype(jnp.int32)
+    return t, jnp.concatenate([score, jnp.zeros((1,), score.dtype)])[t]
+
+
+def _correction(fine, coarse, top, score):
+    """Σ (fine − coarse) (J,) over the refined regions, and the estimate of what the
+    unrefined ones leave out: the worst |fine − coarse| / score of the refined times the
+    score left unrefined."""
+    ok = top > 0
+    delta = jnp.where(ok[:, None], fine - coarse, 0.0)
+    err = jax.lax.stop_gradient(jnp.sum(jnp.abs(delta), -1))
+    calib = jnp.max(jnp.where(ok, err / jnp.where(ok, top, 1.0), 0.0))
+    rest = jnp.maximum(jax.lax.stop_gradient(jnp.sum(score)) - jnp.sum(top), 0.0)
+    return jnp.sum(delta, axis=0), calib * rest
 
 
 def _adaptive_point(table, a, n, wo, geo, rad, cfg):
-    """(L_j (J,), estimate of what the block rule leaves out ()) of one point."""
-    s, b, k_fine, cross = cfg
-    centre, nb, sin_r, size, wts, eff, mass, sub = geo
-    h, w = sub[0].shape[0], sub[2].shape[0]
-    wb = w // b
-    d, sr = centre[:-1], sin_r[:-1]
-    # coarse pass: g = ρ̃⟨n,ω⟩ R_jk(⟨h,ω⟩) at the block centres, the Taylor rule by parts
-    co = jnp.sum(wo * n)
-    ci = jnp.matmul(d, n, precision=HIGHEST)
-    hs = d + wo
-    hn2 = jnp.sum(hs * hs, -1)
-    okh = (hn2 > 1e-12) & (co > 0)
-    hn = jnp.sqrt(jnp.where(okh, hn2, 1.0))
-    ch = jnp.matmul(hs, n, precision=HIGHEST) / hn
-    c = jnp.clip(jnp.sum(hs * d, -1) / hn, 0.0, 1.0)
-    cos_ = jnp.where(co > 0, co, 1.0)
-    dist = normal_distribution(jnp.where(okh, ch, 0.0), a)
-    up = (ci > 0) & okh
-    wgt = jnp.where(up, dist * smith_g2(jnp.where(up, ci, 1.0), cos_, a) / (4 * cos_), 0.0)
-    g = wgt[:, None] * _interp(table, c)  # (T_B, J·3)
+    """(L_j (J,), estimate of what the rule leaves out ()) of one point (module docstring:
+    block rule, texel rule in the K worst blocks, s × s sub-nodes in the K₃ worst texels)."""
+    s, (k2, k3), cross = cfg
+    (centre, nb, sin_r, size, wts, eff, mass), texels, sub = geo
+
+    def g_of(terms):  # g = ρ̃⟨n,ω⟩ R_jk(⟨h,ω⟩) (…, J·3)
+        return terms[0][..., None] * _interp(table, terms[1])
+
+    # level 1: the block rule at the block centres, by parts over the whole map
+    t1 = _lobe_terms(centre[:-1], n, wo, a)
+    g = g_of(t1)  # (T_B, J·3)
     total = _contract(g, eff[:-1], cross)
-    if k_fine == 0:
+    bb = texels[4].shape[-1]  # texels per block
+    if (k2 == 0 and bb > 1) or k3 == 0 and (k2 == 0 or bb == 1):
         return total, jnp.zeros((), total.dtype)
-    # refinement score: the rule's third-order error, (Δ_B/ℓ)³ of the block's weight; blocks
-    # reaching the horizon (a kink of g) count (Δ/ℓ)³ ≥ 1/8
-    ws = jnp.where(okh, dist * smith_g2(jnp.maximum(ci, sr), cos_, a) / (4 * cos_), 0.0)
-    chc = jnp.clip(ch, 0.0, 1.0)
-    ell = 2 * jnp.maximum(c, 1e-3) * jnp.sqrt(a * a * chc**4 + (1 - chc**2) * chc**2 + 1e-30)
-    sz = size[:-1]
-    ratio = jnp.minimum((sz / ell) ** 3, 1.0)  # an unresolved block: its whole value
-    ratio = jnp.where(ci < 2 * sr, jnp.maximum(ratio, 0.125), ratio)
-    # near the horizon a block's weight is the largest of its 3 × 3 neighbourhood's: the
-    # rule's stencil reaches across the kink, and a block below the horizon next to lit ones
-    # gets a value from them (its true value is 0)
-    horizon = ci < 2 * sr
+    ws = _peak_weight(t1, a, sin_r[:-1])
     ws_nb = jnp.max(jnp.concatenate([ws, jnp.zeros((1,), ws.dtype)])[nb[:-1]], axis=-1)
-    ws = jnp.where(horizon, jnp.maximum(ws, ws_nb), ws)
-    score = jax.lax.stop_gradient(ws * mass[:-1] * ratio)
-    t = _select(score, k_fine).astype(jnp.int32)
-    top = jnp.concatenate([score, jnp.zeros((1,), score.dtype)])[t]
-    # the selected blocks integrated texel by texel with s × s Gauss nodes each
-    u, wu, cphi, sphi, wphi = sub
-    bi, bj = t // wb, t % wb  # the pad index gives a block past the last row: masked below
-    ri = jnp.clip(bi[:, None] * b + jnp.arange(b, dtype=jnp.int32), 0, h - 1)  # (K, b) texel rows
-    cj = jnp.clip(bj[:, None] * b + jnp.arange(b, dtype=jnp.int32), 0, w - 1)
-    uu, ww = u[ri].reshape(k_fine, -1), wu[ri].reshape(k_fine, -1)  # (K, b s)
-    cp, sp = cphi[cj].reshape(k_fine, -1), sphi[cj].reshape(k_fine, -1)
-    stt = jnp.sqrt(jnp.maximum(1 - uu * uu, 0.0))
-    m = b * s
-    dirs = jnp.stack([stt[:, :, None] * cp[:, None, :], stt[:, :, None] * sp[:, None, :],
-                      jnp.broadcast_to(uu[:, :, None], (k_fine, m, m))], -1)
-    wf, cf = _lobe_cos_weight(dirs.reshape(k_fine, m * m, 3), n, wo, a)
-    wq = ww[:, :, None] * jnp.tile(wphi, b)[None, None, :]  # (K, b s, b s)
-    lt = rad[:-1].reshape(h, w, 3)[ri[:, :, None], cj[:, None, :]]  # (K, b, b, 3)
-    lt = jnp.repeat(jnp.repeat(lt, s, axis=1), s, axis=2).reshape(k_fine, m * m, 3)
-    rf = _interp(table, cf)  # (K, (b s)², J·3)
-    fine = _per_row(rf, (wq.reshape(k_fine, -1) * wf)[..., None] * lt, cross)  # (K, J)
-    # their coarse value: the Taylor rule on the block's 3 × 3 neighbourhood
+    score1 = _score(t1, a, sin_r[:-1], size[:-1], ws, ws_nb) * mass[:-1]
     gp = jnp.concatenate([g, jnp.zeros((1, g.shape[-1]), g.dtype)])
-    coarse = _per_row(gp[nb[t]], wts[t], cross)  # (K, J)
-    okt = top > 0
-    delta = jnp.where(okt[:, None], fine - coarse, 0.0)
-    total = total + jnp.sum(delta, axis=0)
-    # what was not refined: the worst |fine − coarse| / score of the refined blocks times
-    # the score left unrefined
-    err = jax.lax.stop_gradient(jnp.sum(jnp.abs(delta), -1))
-    calib = jnp.max(jnp.where(okt, err / jnp.where(okt, top, 1.0), 0.0))
-    rest = jnp.maximum(jnp.sum(score) - jnp.sum(top), 0.0)
-    return total, calib * rest
+    u, wu, cphi, sphi, wphi = sub
+    tcentre, tsin_r, tsize, mass_t, tex, iw, a_row, b_col = texels
+    w = cphi.shape[0]
+    if bb > 1:
+        # level 2: the texel rule (the interpolant through the b × b texel centres) in the K
+        # worst blocks
+        t, top = _top(score1, k2)
+        ti = tex[t]  # (K, b²) texel ids (the pad block's: the pad texel)
+        t2 = _lobe_terms(tcentre[ti], n, wo, a)
+        gt = g_of(t2)  # (K, b², J·3)
+        d2, est2 = _correction(_per_row(gt, iw[t], cross), _per_row(gp[nb[t]], wts[t], cross),
+                               top, score1)
+        total = total + d2
+        if k3 == 0:
+            return total, est2
+        # candidates of level 3: those blocks' texels, the weight near the horizon the
+        # block's largest (the interpolant spreads a lit node over the whole block)
+        ws = _peak_weight(t2, a, tsin_r[ti])
+        score2 = _score(t2, a, tsin_r[ti], tsize[ti], ws, jnp.max(ws, -1, keepdims=True))
+        score2 = (score2 * mass_t[ti]).reshape(-1)
+        cand = ti.reshape(-1)
+
+        def coarse_of(q):  # the texel rule's value of candidate q
+            k, r, col = q // bb, cand[q] // w, cand[q] % w
+            bi = b_col.shape[-1]
+            wq = (a_row[r][:, :, None] * b_col[col][:, None, :]).reshape(-1, bi * bi)
+            return _per_row(gt[k], wq[..., None] * rad[cand[q]][:, None, :], cross)
+    else:  # one texel per block: level 3 refines blocks, in place of their block rule
+        est2, score2, cand = 0.0, score1, jnp.arange(score1.shape[0], dtype=jnp.int32)
+
+        def coarse_of(q):
+            return _per_row(gp[nb[q]], wts[q], cross)
+    # level 3: s × s Gauss sub-nodes (the exhaustive rule's) in the K₃ worst texels
+    q, top = _top(score2, k3)
+    q = jnp.minimum(q, score2.shape[0] - 1)  # a pad entry (score 0, masked) reads the last one
+    ti = cand[q]  # (K₃,) texel ids
+    r, col = ti // w, ti % w
+    stt = jnp.sqrt(jnp.maximum(1 - u[r] ** 2, 0.0))  # (K₃, s)
+    d = jnp.stack([stt[:, :, None] * cphi[col][:, None, :], stt[:, :, None] * sphi[col][:, None, :],
+                   jnp.broadcast_to(u[r][:, :, None], stt.shape + (s,))], -1)
+    wf, cf = _lobe_cos_weight(d.reshape(-1, s * s, 3), n, wo, a)
+    wq = (wu[r][:, :, None] * wphi[None, None, :]).reshape(-1, s * s)
+    fine = _per_row(_interp(table, cf), (wq * wf)[..., None] * rad[ti][:, None, :], cross)
+    d3, est3 = _correction(fine, coarse_of(q), top, score2)
+    return total + d3, est2 + est3
 
 
 @functools.partial(jax.jit, static_argnums=(7,))
 def _adaptive_jit(film, alpha, normal, view, radiance, geo, extra, cfg):
-    observer, s, b, n_cos, cross, arithmetic, k_fine, one_film, chunk = cfg
+    observer, s, n_cos, cross, arithmetic, counts, one_film, chunk = cfg
     del extra
     dtype = alpha.dtype
     obs = cross_band_name(observer) if cross else observer
@@ -438,7 +520,7 @@ def _adaptive_jit(film, alpha, normal, view, radiance, geo, extra, cfg):
 
     def one(xs):
         table = shared if one_film else _r_table(Film(*xs[:5]), obs, n_cos, arithmetic, dtype)
-        return _adaptive_point(table, xs[5], xs[6], xs[7], geo, rad, (s, b, k_fine, cross))
+        return _adaptive_point(table, xs[5], xs[6], xs[7], geo, rad, (s, counts, cross))
 
     out, est = jax.lax.map(one, tuple(flat), batch_size=chunk)
     cos_o = jnp.sum(normal * view, -1)
@@ -510,11 +592,12 @@ def _batch(batch_size, n_pts, per_point):
 def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, cross_band,
                    arithmetic, one_film=False, subdivisions=None, n_cos=1024, n_samples=4096,
                    key=None, batch_size=None, exhaustive=False, return_estimate=False,
-                   max_height: int | None = 256):
+                   max_height: int | None = 256, refine=None):
     """`reference` / `mc` of `envmap_radiance` on broadcast inputs (validated by the caller):
     film fields and alpha of one shape, normal and view (..., 3) of that shape. `one_film`:
     every point has the same film (its R_jk table is built once); also detected here for
-    concrete fields whose entries are all equal."""
+    concrete fields whose entries are all equal. `refine`: (K, K₃) of the adaptive rule
+    instead of `refine_counts` (all blocks and all texels: the exhaustive rule's value)."""
     dtype = alpha.dtype
     n_pts = int(np.prod(alpha.shape))
     one_film = bool(one_film) or all(_same(x) for x in film)
@@ -550,21 +633,42 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
         out = _exact_jit(film, alpha, normal, view, rad, nodes, cfg)
         return (out, jnp.zeros(alpha.shape, dtype)) if return_estimate else out
     b = block_size(*env.shape)
-    lay = block_layout(*env.shape, b)
-    k_fine = refine_blocks(len(lay["centre"]) - 1, b, s)
-    wts, eff = block_light(rad, b)
-    hb, wb = h // b, env.shape[1] // b
-    mass = jnp.sum((jnp.asarray(texel_solid_angles(*env.shape), dtype)[..., None] * rad)
-                   .reshape(hb, b, wb, b, 3), axis=(1, 3, 4)).reshape(-1)  # Σ_k Ω c per block
-    mass = jnp.concatenate([mass, jnp.zeros((1,), dtype)])
-    geo = (jnp.asarray(lay["centre"], dtype), jnp.asarray(lay["nb"], jnp.int32),
-           jnp.asarray(lay["sin_r"], dtype), jnp.asarray(lay["size"], dtype), wts, eff, mass,
-           tuple(jnp.asarray(x, dtype) for x in sub_nodes(*env.shape, s)))
+    counts = (refine_counts(h * env.shape[1] // b**2, b, s) if refine is None
+              else tuple(int(x) for x in refine))
+    geo = _adaptive_geometry(rad, b, s)
     chunk = int(batch_size or 1)
-    cfg = (observer, s, b, int(n_cos), bool(cross_band), arithmetic, k_fine,
+    cfg = (observer, s, int(n_cos), bool(cross_band), arithmetic, counts,
            one_film, max(1, min(chunk, max(n_pts, 1))))
     out, est = _adaptive_jit(film, alpha, normal, view, rad, geo, None, cfg)
     return (out, est) if return_estimate else out
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2))
+def _adaptive_geometry(rad, b: int, s: int):
+    """What the adaptive rule reads per map (module docstring): the block grid with its
+    Taylor weights (`block_layout`, `block_light`) and light per block; the texel grid with
+    light per texel, the texels of each block and the weights of its texel rule
+    (`block_interpolant`, `interpolant_light`); the sub-nodes of each row and column (`sub_nodes`)."""
+    h, w = rad.shape[:2]
+    dtype = rad.dtype
+    omega_c = jnp.sum(jnp.asarray(texel_solid_angles(h, w), dtype)[..., None] * rad, -1)  # Σ_k Ω c
+    pad = lambda x: jnp.concatenate([x, jnp.zeros((1,), dtype)])
+    lay = block_layout(h, w, b)
+    wts, eff = block_light(rad, b)
+    mass = omega_c.reshape(h // b, b, w // b, b).sum(axis=(1, 3)).reshape(-1)
+    blocks = (jnp.asarray(lay["centre"], dtype), jnp.asarray(lay["nb"], jnp.int32),
+              jnp.asarray(lay["sin_r"], dtype), jnp.asarray(lay["size"], dtype), wts, eff,
+              pad(mass))
+    lay1 = block_layout(h, w, 1)
+    hb, wb = h // b, w // b
+    tex = (np.arange(h).reshape(hb, 1, b, 1) * w + np.arange(w).reshape(1, wb, 1, b))
+    tex = np.concatenate([tex.reshape(hb * wb, b * b), np.full((1, b * b), h * w)])
+    a_row, b_col = block_interpolant(h, w, b)
+    texels = (jnp.asarray(lay1["centre"], dtype), jnp.asarray(lay1["sin_r"], dtype),
+              jnp.asarray(lay1["size"], dtype), pad(omega_c.reshape(-1)),
+              jnp.asarray(tex, jnp.int32), interpolant_light(rad, b),
+              jnp.asarray(a_row, dtype), jnp.asarray(b_col, dtype))
+    return blocks, texels, tuple(jnp.asarray(x, dtype) for x in sub_nodes(h, w, s))
 
 
 def _same(x) -> bool:

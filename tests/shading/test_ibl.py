@@ -130,8 +130,8 @@ def test_reference_converged_by_refinement(forest):
     the patch reference of SPEC §7, a half-vector quadrature with exact spectral R, 3e-5),
     `test_mc_converges_to_reference` (16 VNDF Monte Carlo estimates, a different estimator
     and a nearest-texel lookup, mean within 4 standard errors), and
-    `test_rotation_about_z_by_whole_columns` (rotating map, normal and view together
-    changes nothing, 1e-10)."""
+    `test_rotation_about_z_by_whole_columns` (rotating map, normal and view together by
+    whole blocks changes nothing, 1e-10)."""
     n = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, -0.8, 0.6]])
     v = np.array([[0.5, 0.0, np.sqrt(0.75)], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
     for alpha in (0.08, 0.3):
@@ -150,16 +150,19 @@ def _auto(env, alpha):
 
 
 def test_rotation_about_z_by_whole_columns(forest):
-    h, w = forest.shape
-    k = 11
-    rot = 2 * np.pi * k / w
-    rz = np.array([[np.cos(rot), -np.sin(rot), 0], [np.sin(rot), np.cos(rot), 0], [0, 0, 1]])
+    """Rotating map, normal and view together about z by whole 4 × 4 blocks of the adaptive
+    reference's grid changes nothing (1e-10; measured at rounding); by 11 columns, which
+    moves the light across the blocks, only by the rule's error (≤ 2e-5 of the band
+    maximum; measured 4.7e-6)."""
     n = np.array([0.3, -0.4, np.sqrt(0.75)])
     v = np.array([0.0, 0.6, 0.8])
-    rolled = EnvMap(jnp.roll(forest.radiance, k, axis=1))
-    a = envmap_radiance(FILM, 0.2, n, v, forest)
-    b = envmap_radiance(FILM, 0.2, rz @ n, rz @ v, rolled)
-    np.testing.assert_allclose(b, a, rtol=1e-10)
+    a = np.asarray(envmap_radiance(FILM, 0.2, n, v, forest))
+    for k, rtol in ((12, 1e-10), (11, 2e-5)):
+        rot = 2 * np.pi * k / forest.shape[1]
+        rz = np.array([[np.cos(rot), -np.sin(rot), 0], [np.sin(rot), np.cos(rot), 0], [0, 0, 1]])
+        rolled = EnvMap(jnp.roll(forest.radiance, k, axis=1))
+        b = np.asarray(envmap_radiance(FILM, 0.2, rz @ n, rz @ v, rolled))
+        assert np.abs(b - a).max() <= rtol * np.abs(a).max(), (k, np.abs(b - a).max() / np.abs(a).max())
 
 
 def test_single_bright_texel_is_brdf_times_solid_angle():

@@ -653,6 +653,12 @@ def _ibl_reference_rate(kind: str, alpha: str) -> float:
     return next(r["points_per_s"] for r in artifact("ibl_bench.json")["throughput"]
                 if r["name"].startswith(f"reference, {kind} ") and f"α = {alpha}," in r["name"])
 
+def _ibl_sphere_row() -> dict:
+    """The whole-sphere reference row of ibl_bench.json."""
+    return next(r for r in artifact("ibl_bench.json")["throughput"]
+                if r["name"].startswith("reference, 256 px sphere"))
+
+
 def _bench_load():
     return [artifact("bench.json")["environment"]["cpu_count"],
             artifact("bench.json")["environment"]["load_average"][0]]
@@ -669,6 +675,8 @@ SPECS = [
              r"(\S+) / (\S+) / (\S+) for the exhaustive rule", ("ibl_bench.json",),
              lambda: [_ibl_reference_rate(kind, a) for kind in ("adaptive", "exhaustive")
                       for a in ("0.05", "0.25", "0.6")]),
+    Sentence(r"a whole 256 px sphere\s+\((\S+) points, α = 0.25\) takes (\S+) s warm",
+             ("ibl_bench.json",), lambda: [_ibl_sphere_row()["points"], _ibl_sphere_row()["warm_s"]]),
     Table("| ΔE₀₀ vs reference (mean / p95) |", ("improved.json",), 1, _improved_rows),
     Table("| film (uniform light, θₒ 0–85°", ("models.json",), 1, _models_rows),
     Table("| map (pooled pixels) |", ("improved.json",), 1, _improved_map_rows),

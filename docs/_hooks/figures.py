@@ -3,7 +3,7 @@
 The studies pages show the figures that the studies write into ``figures/`` at the repository
 root (``make figure7``, ``thinfilm-jax bench``, ...). Copying them into ``docs/`` would leave two
 copies to keep in step, and a symbolic link does not survive every checkout, so this hook adds
-``figures/*.png`` (and the ``.json`` result files, for download) to the site's files as
+``figures/**/*.png`` (and the ``.json`` result files, for download) to the site's files as
 if they lay in ``docs/figures/``. A page links them with a path relative to itself, e.g.
 ``![Figure 7](../figures/figure7.png)`` from ``docs/studies/figure7.md``; MkDocs then checks
 every such link in ``--strict`` mode like any other, so a missing figure fails the build.
@@ -21,10 +21,10 @@ SUFFIXES = {".png", ".json"}
 def on_files(files: Files, config) -> Files:
     root = Path(config["config_file_path"]).resolve().parent
     figures = root / "figures"
-    for path in sorted(figures.glob("*")):
+    for path in sorted(figures.rglob("*")):
         if path.suffix not in SUFFIXES or not path.is_file():
             continue
-        uri = f"figures/{path.name}"
+        uri = f"figures/{path.relative_to(figures).as_posix()}"
         if files.get_file_from_path(uri) is not None:
             continue
         # src_dir = the repository root: the file's source is figures/<name>, its URL too

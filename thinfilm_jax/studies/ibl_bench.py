@@ -7,7 +7,8 @@ default JAX device). Writes ``ibl_bench.json`` and ``ibl_bench.md``.
    camera, per-pixel α ∈ [0.05, 0.6] and d ∈ [250, 850] nm), float32, per real-time
    method and option; compile time (first call − warm call) reported apart from the warm
    time. The reference (float64) is timed on the points of a small sphere at α = 0.05,
-   0.25, 0.6: the adaptive rule against the exhaustive one, interleaved, warm minima.
+   0.25, 0.6: the adaptive rule against the exhaustive one, interleaved, warm minima; and
+   on a whole 256 px sphere (64 px with ``--quick``) as `envmap_radiance` runs it.
 2. Accuracy of the real-time options against the reference on a 48 px sphere under each
    shipped map at α = 0.1 and 0.35 (between prefilter levels) (ΔE₀₀ mean / p95): cross-band vs diagonal, luminance vs per-channel moments,
    LUT vs exact vs Gaussian Ŝ, prefilter resolution and number of roughness levels.
@@ -107,7 +108,30 @@ def throughput(width=2560, height=1440, envmap="venice_sunset", verbose=True):
     for r in rows:
         r["vs_ideal"] = r["warm_s"] / base["ideal"]
     rows += reference_speedup(env, verbose=verbose)
+    rows.append(reference_sphere(env, resolution=64 if width < 1000 else 256, verbose=verbose))
     return rows
+
+
+def reference_sphere(env, resolution=256, alpha=0.25, verbose=True):
+    """A whole `resolution` px sphere shaded by the reference as a user calls it
+    (`envmap_radiance`, float64, Figure 4's film, one film for every point): the first call
+    (compile + run) and a second, warm one."""
+    wo, right, up = camera(0.7, 15.0)
+    mask, n = sphere(resolution, wo, right, up)
+    pts = n[mask]
+    film = Film(600.0, 1.2, 2.0, 0.0)
+
+    def call():
+        return envmap_radiance(film, alpha, pts, wo, env)
+
+    t = _time(call)
+    k = len(pts)
+    row = {"name": f"reference, {resolution} px sphere (float64, α = {alpha:g}, {k} points)",
+           "points": k, "points_per_s": k / t["warm_s"], **t}
+    if verbose:
+        print(f"  {row['name']}: {t['warm_s']:.1f} s warm ({row['points_per_s']:.0f} points/s), "
+              f"compile {t['compile_s']:.1f} s")
+    return row
 
 
 def reference_speedup(env, alphas=(0.05, 0.25, 0.6), resolution=8, repeats=3, verbose=True):

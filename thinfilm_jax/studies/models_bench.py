@@ -41,8 +41,6 @@ import json
 import time
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ..brdf import material as M
@@ -315,7 +313,7 @@ def write_markdown(result: dict, path: Path):
         _table(result["film_methods"], ["grid", "method", "dE2000_mean", "dE2000_p95",
                                         "dE2000_max", "warm_s_per_point"],
                ["grid", "method", "ΔE mean", "ΔE p95", "ΔE max", "s/pt"]),
-        "", f"`khr` is linear Rec. 709 (SPEC §10): its ΔE compares in CIELAB (D65) with the "
+        "", "`khr` is linear Rec. 709 (SPEC §10): its ΔE compares in CIELAB (D65) with the "
         "reference's bands converted to linear Rec. 709 (mirror → (1, 1, 1) in both).", "",
         f"## 3. Under the shipped maps ({', '.join(result['config']['map_names'])}) at "
         f"{result['ibl']['map_shape']} texels, {result['ibl']['sphere']} sphere points, GGX "

@@ -6,7 +6,7 @@
 * Every public name of `thinfilm_jax` (the names `thinfilm_jax/__init__.py` imports) is a
   `:::` target of docs/api/*.md, directly or as a member of a documented module, and has its
   anchor in the built API pages.
-* docs/reference/layout.md lists every module of the package once (the README's "Layout").
+* (docs/reference/layout.md, the package layout page, is checked by tests/test_layout.py.)
 * Every page under docs/ is in the nav (except the draft and the hook that mkdocs.yml
   excludes).
 * The measured numbers of the studies pages agree with figures/ (the checks of
@@ -166,17 +166,6 @@ def test_the_coverage_check_fails_when_a_name_is_missing():
     assert not uncovered(names, api_targets({"a.md": "::: thinfilm_jax.core.film.Film\n"}))
     assert not uncovered(names, api_targets({"a.md": (
         "::: thinfilm_jax.core.film\n    options:\n      members: [Film]\n")}))
-
-
-def test_layout_page_lists_every_module():
-    """docs/reference/layout.md carries README's "Layout" table: every module once."""
-    text = (DOCS / "reference" / "layout.md").read_text("utf-8")
-    listed = re.findall(r"^\| `([^`]+\.py)` \|", text, flags=re.M)
-    package = ROOT / "thinfilm_jax"
-    modules = sorted(str(p.relative_to(package)) for p in package.rglob("*.py"))
-    assert len(listed) == len(set(listed)), "a module is listed twice"
-    missing, extra = sorted(set(modules) - set(listed)), sorted(set(listed) - set(modules))
-    assert not missing and not extra, f"add to docs/reference/layout.md: {missing}; remove: {extra}"
 
 
 # The studies pages carry the README's measured tables and sentences (copied, with their

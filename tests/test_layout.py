@@ -8,6 +8,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_layout_matches_tree():
+    """docs/reference/layout.md (the package layout page the README links to, on the docs
+    site) has one table row per module of thinfilm_jax/: none missing, none extra, none twice."""
     section = (ROOT / "docs" / "reference" / "layout.md").read_text(encoding="utf-8")
     listed = re.findall(r"^\| `([^`]+\.py)` \|", section, flags=re.M)
     package = ROOT / "thinfilm_jax"

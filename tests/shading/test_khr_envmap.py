@@ -187,15 +187,16 @@ def test_below_horizon_black_and_refusals(maps):
 def test_render_column_in_the_render_observers_bands(maps, batch):
     """`thinfilm-jax render --method khr` (`studies.render`): the column shades under a
     render observer other than the default (khr's output is Rec. 709 whatever it is: the
-    shader drops the observer) and is taken to that observer's bands (`khr_to_bands`) for
-    display and ΔE; a flat reflectance's RGB (R, R, R) maps to bands (R, R, R) in both
-    observers (the map's white, equal-energy light, is the bands' white). `render_one`
-    itself is not run here: its sharded compilation and a second observer's prefilter cost
-    ~20 s on this machine."""
-    from thinfilm_jax.studies.render import _shade, khr_to_bands
+    shader drops the observer) and is taken to that observer's bands
+    (`khr.rec709_to_bands`) for display and ΔE; a flat reflectance's RGB (R, R, R) maps to
+    bands (R, R, R) in both observers (the map's white, equal-energy light, is the bands'
+    white). `render_one` itself is not run here: its sharded compilation and a second
+    observer's prefilter cost ~20 s on this machine."""
+    from thinfilm_jax.spectral.khr import rec709_to_bands
+    from thinfilm_jax.studies.render import _shade
 
     for obs in ("stiles_burch_1959_10", "cie_1931_2"):
-        np.testing.assert_allclose(khr_to_bands(np.full((2, 3), 0.3), obs), 0.3, atol=1e-12)
+        np.testing.assert_allclose(rec709_to_bands(np.full((2, 3), 0.3), obs), 0.3, atol=1e-12)
     film, alpha, theta, view, _ = batch
     normal = np.broadcast_to(N, view.shape)
     got = _shade(film, normal, alpha, view, maps["white"], method="khr",

@@ -247,6 +247,49 @@ def test_delta_e_whites():
     assert float(delta_e_to_exact(np.full(3, 0.3), np.full(3, 0.3))) < 1e-9
 
 
+# ------------------------------------------------------------- Rec. 709 ↔ bands (whites)
+#: CAT02 (CIE 159:2004; Moroney et al. 2002), XYZ → sharpened cone responses, typed in here
+#: from the publication (not from colour-science) to check the module's adaptation is CAT02.
+M_CAT02 = np.array([[0.7328, 0.4296, -0.1624],
+                    [-0.7036, 1.6975, 0.0061],
+                    [0.0030, 0.0136, 0.9834]])
+
+
+@pytest.mark.parametrize("observer", ["cie_1931_2", "stiles_burch_1959_10"])
+def test_rec709_bands_round_trip_and_whites(observer):
+    """`rec709_to_bands` and `bands_to_rec709` are inverse (both orders, to 1e-12; measured
+    ~3e-15), a flat reflectance R is RGB (R, R, R) and bands (R, R, R) (the D65 white goes to
+    the mirror's equal-energy white: without the adaptation, flat RGB is not flat bands, off
+    by ≥ 0.01 here), and the map is T⁻¹ K M with K the von Kries matrix of the published
+    CAT02 cone matrix (to 1e-12: another transform, e.g. Bradford, also keeps flat flat but
+    fails this)."""
+    from thinfilm_jax.spectral.colorimetry import band_to_xyz_matrix
+
+    rng = np.random.default_rng(7)
+    x = rng.uniform(-0.1, 1.5, (64, 3))
+    for a, b in ((K.rec709_to_bands, K.bands_to_rec709), (K.bands_to_rec709, K.rec709_to_bands)):
+        np.testing.assert_allclose(b(a(x, observer), observer), x, rtol=0, atol=1e-12)
+    flat = np.array([0.0, 0.3, 1.0, 1.7])[:, None] * np.ones(3)
+    np.testing.assert_allclose(K.rec709_to_bands(flat, observer), flat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(K.bands_to_rec709(flat, observer), flat, rtol=0, atol=1e-12)
+    t = band_to_xyz_matrix(observer)
+    unadapted = np.ones(3) @ K.REC709_TO_XYZ.T @ np.linalg.inv(t).T
+    assert np.ptp(unadapted) > 0.01  # the white the adaptation has to move
+    w_d65, w_e = K.REC709_TO_XYZ @ np.ones(3), t @ np.ones(3)
+    k = np.linalg.inv(M_CAT02) @ np.diag((M_CAT02 @ w_e) / (M_CAT02 @ w_d65)) @ M_CAT02
+    by_hand = x @ (np.linalg.inv(t) @ k @ K.REC709_TO_XYZ).T
+    np.testing.assert_allclose(K.rec709_to_bands(x, observer), by_hand, rtol=0, atol=1e-12)
+
+
+def test_rec709_bands_bad_input():
+    with pytest.raises(ValueError, match="rgb"):
+        K.rec709_to_bands(np.ones(4))
+    with pytest.raises(ValueError, match="values"):
+        K.bands_to_rec709(np.ones((2, 2)))
+    with pytest.raises(ValueError, match="observer"):
+        K.rec709_to_bands(np.ones(3), "cie_2000")
+
+
 # ----------------------------------------------------------------------------- constants
 def _derived_xyz_to_rgb(white_xyz):
     import colour

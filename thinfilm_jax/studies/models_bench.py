@@ -41,8 +41,6 @@ import json
 import time
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ..brdf import material as M
@@ -134,7 +132,14 @@ def _stats(de) -> dict:
 
 
 def _bands_to_rec709(values):
-    """Linear Rec. 709 of band values: mirror → (1, 1, 1) (CAT02 mirror white → D65)."""
+    """Linear Rec. 709 of band values: mirror → (1, 1, 1) (CAT02 mirror white → D65).
+
+    colour-science's ITU-R BT.709 space, the one `delta_e_rec709` reads back: its matrix is
+    derived from D65's chromaticity (0.3127, 0.3290), not the extension's printed matrix
+    (white (0.95047, 1, 1.08883)) that `khr.bands_to_rec709` inverts exactly: the two differ
+    by ≤ 1.9e-4 per channel for bands in [0, 1]³ (flat bands agree to 1e-15), ΔE ≤ 0.006
+    (2000 random bands in [0, 1.2]³), ≤ 0.002 on the khr rows' ΔE per point (the films of
+    tests/spectral/test_khr.py)."""
     import colour
 
     cs = colour.RGB_COLOURSPACES["ITU-R BT.709"]
@@ -308,7 +313,7 @@ def write_markdown(result: dict, path: Path):
         _table(result["film_methods"], ["grid", "method", "dE2000_mean", "dE2000_p95",
                                         "dE2000_max", "warm_s_per_point"],
                ["grid", "method", "ΔE mean", "ΔE p95", "ΔE max", "s/pt"]),
-        "", f"`khr` is linear Rec. 709 (SPEC §10): its ΔE compares in CIELAB (D65) with the "
+        "", "`khr` is linear Rec. 709 (SPEC §10): its ΔE compares in CIELAB (D65) with the "
         "reference's bands converted to linear Rec. 709 (mirror → (1, 1, 1) in both).", "",
         f"## 3. Under the shipped maps ({', '.join(result['config']['map_names'])}) at "
         f"{result['ibl']['map_shape']} texels, {result['ibl']['sphere']} sphere points, GGX "

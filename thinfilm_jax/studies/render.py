@@ -24,8 +24,8 @@ published methods); improved reads it with its suns split off and shaded apart
 (`prefilter_envmap(sources=ibl.DEFAULT_SOURCES)`, `thinfilm_jax.shading.sources`), as
 `envmap_radiance(method="improved")` does with a plain map. khr (glTF `KHR_materials_iridescence`,
 not a default column) shades linear Rec. 709 RGB: its values are taken to the bands of the
-render's observer (`khr_to_bands`) before display and ΔE. Display: exposure × radiance, converted
-bands → XYZ → sRGB (colour-science), clipped; the exposure maps the reference's 99th
+render's observer (`khr.rec709_to_bands`) before display and ΔE. Display: exposure × radiance,
+converted bands → XYZ → sRGB (colour-science), clipped; the exposure maps the reference's 99th
 luminance percentile to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled
 values against the reference (mirror white Y = 1), mean and p95 per panel.
 
@@ -54,8 +54,8 @@ import numpy as np
 
 from ..core._io import atomic_write, write_json
 from ..optics.airy import choose_arithmetic
-from ..spectral.colorimetry import band_to_xyz_matrix, bands_to_srgb, bands_to_xyz, delta_e2000
-from ..spectral.khr import REC709_TO_XYZ
+from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
+from ..spectral.khr import rec709_to_bands
 from ..spectral.spectra import DEFAULT_OBSERVER
 from ..shading.envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..core.film import Film
@@ -159,31 +159,10 @@ def _view_azimuth(env) -> float:
 
 def _shade(film, normal, alpha, view, envmap, *, method, observer, options, subdivisions):
     """One block of shading points (the function `map_sharded` runs on every device)."""
-    if method == "khr":  # Rec. 709 RGB whatever the render's observer (`khr_to_bands`)
+    if method == "khr":  # Rec. 709 RGB whatever the render's observer (`rec709_to_bands`)
         observer = DEFAULT_OBSERVER
     return envmap_radiance(film, alpha, normal, view, envmap, method=method, observer=observer,
                            options=options, subdivisions=subdivisions)
-
-
-def khr_to_bands(rgb, observer: str) -> np.ndarray:
-    """`method="khr"`'s linear Rec. 709 RGB (..., 3) as the bands of `observer` (host, NumPy).
-
-    XYZ by the extension's matrix (`khr.REC709_TO_XYZ`), adapted from its D65 white to the
-    equal-energy white of the bands (CAT02, as `khr.delta_e_to_exact`: a map texel
-    (1, 1, 1) is equal-energy light, the bands' white), then the bands' inverse matrix. A
-    flat reflectance R, RGB (R, R, R), becomes bands (R, R, R).
-
-    Example:
-        >>> np.round(khr_to_bands(np.full(3, 0.3), "cie_1931_2"), 12).tolist()
-        [0.3, 0.3, 0.3]
-    """
-    import colour
-
-    t = band_to_xyz_matrix(observer)
-    xyz = np.asarray(rgb, float) @ REC709_TO_XYZ.T
-    adapted = colour.adaptation.chromatic_adaptation_VonKries(
-        xyz, REC709_TO_XYZ.sum(axis=1), t.sum(axis=1), transform="CAT02")
-    return adapted @ np.linalg.inv(t).T
 
 
 def _shader(cache: dict, devices, method: str, observer: str, film, alpha, env):
@@ -286,7 +265,7 @@ def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
             t0 = time.perf_counter()
             vals = to_host(shade(film, pts, alpha, wo, src))
             out["times"][method] = time.perf_counter() - t0
-        out["values"][method] = khr_to_bands(vals, cfg.observer) if method == "khr" else vals
+        out["values"][method] = rec709_to_bands(vals, cfg.observer) if method == "khr" else vals
     d = (np.arange(cfg.resolution) + 0.5) / cfg.resolution * 2 - 1
     bx, by = np.meshgrid(d, -d)
     bg_dir = -wo + 0.6 * (bx[..., None] * right + by[..., None] * up)

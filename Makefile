@@ -19,7 +19,7 @@ figure7: $(STAMP)
 
 # two pytest-xdist workers (the CI machine has 2 cores); work units: tests/conftest.py
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=20
 
 bench: $(STAMP)
 	$(BIN)/thinfilm-jax bench --out figures

@@ -279,6 +279,13 @@ def read_taps(tables, index, weight):
                  for o, t in zip(jnp.split(out, cuts, axis=-1), tables))
 
 
+def _pair(f, pattern=(0, 1)):
+    """(1 − f, f) on a new last axis, taken in the order of `pattern` (0: 1 − f, 1: f), as
+    one broadcast expression (c + f·s with c, s ∈ {1, 0}, {−1, 1}: exact)."""
+    p = np.asarray(pattern)
+    return jnp.asarray(1 - p, f.dtype) + f[..., None] * jnp.asarray(2 * p - 1, f.dtype)
+
+
 def _bilinear(tab, x, y):
     """tab[(x, y) ∈ [0, 1]², ...] read bilinearly on its uniform grid."""
     def cell(v, n):
@@ -290,10 +297,9 @@ def _bilinear(tab, x, y):
     x, y = jnp.broadcast_arrays(jnp.asarray(x), jnp.asarray(y))
     i0, fx = cell(x, n_x)
     j0, fy = cell(y, n_y)
-    k = i0 * n_y + j0  # flat taps (i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)
-    index = jnp.stack([k, k + n_y, k + 1, k + n_y + 1], axis=-1)
-    gx, gy = 1 - fx, 1 - fy
-    weight = jnp.stack([gx * gy, fx * gy, gx * fy, fx * fy], axis=-1)
+    # flat taps (i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)
+    index = (i0 * n_y + j0)[..., None] + np.array([0, n_y, 1, n_y + 1], np.int32)
+    weight = _pair(fx, (0, 1, 0, 1)) * _pair(fy, (0, 0, 1, 1))
     return read_taps((tab.reshape((n_x * n_y,) + tab.shape[2:]),), index, weight)[0]
 
 

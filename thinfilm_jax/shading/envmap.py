@@ -35,6 +35,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from ..realtime.improved import _pair
+
 DATA = Path(__file__).resolve().parents[1] / "data" / "envmaps"
 SHIPPED = {
     "venice_sunset": DATA / "venice_sunset_256.hdr",
@@ -231,11 +233,11 @@ def bilinear_taps(omega, h: int, w: int):
     i·w + j (..., 4) and weights (..., 4) summing to 1, for one gather of a table stored
     (h·w, channels): Σ_t weight_t · table[index_t] is the bilinear value (same cell, same
     fractions; the products are only ordered differently)."""
-    i0, i1, j0, j1, fx, fy = _bilinear_cell(omega, h, w)
-    index = jnp.stack([i0 * w + j0, i0 * w + j1, i1 * w + j0, i1 * w + j1], axis=-1)
-    gx, gy = 1 - fx, 1 - fy
-    weight = jnp.stack([gx * gy, fx * gy, gx * fy, fx * fy], axis=-1)
-    return index, weight
+    i0, _, j0, _, fx, fy = _bilinear_cell(omega, h, w)
+    # taps (i0, j0), (i0, j1), (i1, j0), (i1, j1) as broadcast expressions (no stack)
+    di, dj = np.array([0, 0, 1, 1], np.int32), np.array([0, 1, 0, 1], np.int32)
+    index = (i0[..., None] + di) * w + jnp.mod(j0[..., None] + dj, w)
+    return index, _pair(fx, dj) * _pair(fy, di)
 
 
 def downsample(envmap, factor: int) -> EnvMap:

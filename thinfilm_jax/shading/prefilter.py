@@ -52,7 +52,7 @@ from ..core import _validate as V
 from .envmap import (EnvMap, bilinear_taps, downsample, load_envmap, luminance_weights,
                      texel_centers, texel_solid_angles)
 from ..optics.fresnel import complex_dtype, safe_sqrt
-from ..realtime.improved import _bilinear, lookup_lobe, read_taps
+from ..realtime.improved import _bilinear, _pair, lookup_lobe, read_taps
 from ..spectral.lut import ShatLUT, build_shat_lut
 from ..brdf.microfacet import albedo, normal_distribution, smith_g2
 from .sources import Sources, extract_sources, with_film_tables
@@ -232,9 +232,11 @@ def _level_taps(pref: PrefilteredEnvMap, direction, sqrt_alpha):
     i0, f = _level_lerp(pref, sqrt_alpha)
     index, weight = bilinear_taps(direction, h, w)  # (..., 4)
     i0, f = jnp.broadcast_to(i0, index.shape[:-1]), jnp.broadcast_to(f, index.shape[:-1])
-    lo = i0[..., None] * (h * w) + index
-    return (jnp.concatenate([lo, lo + h * w], axis=-1),
-            jnp.concatenate([weight * (1 - f)[..., None], weight * f[..., None]], axis=-1))
+    level = np.array([0, 1], np.int32)  # levels l, l + 1 on a new axis before the taps
+    lerp = _pair(f)  # (1 − f, f)
+    index = (i0[..., None, None] + level[:, None]) * (h * w) + index[..., None, :]
+    weight = lerp[..., None] * weight[..., None, :]
+    return index.reshape(index.shape[:-2] + (8,)), weight.reshape(weight.shape[:-2] + (8,))
 
 
 def lookup_prefiltered(pref: PrefilteredEnvMap, omega_r, sqrt_alpha):

@@ -101,31 +101,3 @@ def test_per_channel_read_equals_the_cross_band_sum(cross_lut):
     ref = jnp.sum(nine * rgb[:, None, :], axis=-1)
     got = filtered_kernel(film, wo, wr, cov, observer=CROSS, lut=cross_lut, light=rgb)
     assert float(jnp.max(jnp.abs(got - ref))) < 1e-6 * float(jnp.max(jnp.abs(ref)))
-
-
-@pytest.mark.parametrize("method, max_bytes", [("ideal", 1905), ("filtered", 3305),
-                                               ("improved", 6648), ("improved_kernel", 3953)])
-def test_table_reads_are_interpolated_once(cross_lut, method, max_bytes):
-    """The prefiltered-map read (`prefilter.lookup_prefiltered`: bilinear in direction ×
-    two roughness levels, 3 + 9 channels) and the bin-table read (`improved._bilinear`) gather
-    every channel of a tap once and sum the weighted taps in one reduction, so the many loops
-    that consume them read the interpolated values, not every tap again. Measured 1,732
-    (`envmap_radiance` ideal), 3,004 (filtered), 6,043 (improved) and 3,593
-    (`improved_kernel`) bytes a point (bound + 10 %); tap-by-tap reads, re-read by each
-    consumer, moved 1,906, 9,034, 12,115 and 7,448 (figures/kernel_bench.md)."""
-    from thinfilm_jax.realtime.improved import bin_table, improved_kernel
-    from thinfilm_jax.shading.ibl import envmap_radiance
-    from thinfilm_jax.shading.prefilter import PrefilteredEnvMap
-
-    film = Film(*(_spec() for _ in range(5)))
-    table = bin_table(dtype=F32)
-    if method == "improved_kernel":
-        cost, _ = _cost(lambda f, c, a, tb, t: improved_kernel(f, c, a, tb, shat="lut", lut=t),
-                        film, _spec(), _spec(), table, build_shat_lut(dtype=F32))
-    else:
-        levels = [jax.ShapeDtypeStruct(s, F32) for s in ((17,), (17, 64, 128, 3),
-                                                          (17, 64, 128, 9), (64, 33))]
-        pref = PrefilteredEnvMap(*levels, cross_lut)
-        cost, _ = _cost(lambda f, a, n, v, p: envmap_radiance(f, a, n, v, p, method=method),
-                        film, _spec(), _spec(3), _spec(3), pref)
-    assert cost["bytes accessed"] < max_bytes, cost

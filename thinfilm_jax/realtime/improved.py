@@ -265,27 +265,6 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
     return BinTable(*(jnp.asarray(x, dtype) for x in host))
 
 
-def read_taps(tables, index, weight):
-    """Σ_t weight_t · table[index_t] for each of `tables` (n, ...) (rows of channels, e.g.
-    a grid flattened to its nodes) at the taps `index` (..., T) int, `weight` (..., T).
-    Returns one array (..., ...) per table. One gather of every channel of the tables per
-    tap and one weighted sum over the taps: a read that feeds many consumers is
-    interpolated once, where tap-by-tap reads would each be re-read by every consumer."""
-    flat = [t.reshape((t.shape[0], -1)) for t in tables]
-    vals = jnp.concatenate([t[index] for t in flat], axis=-1)  # (..., T, C)
-    out = jnp.sum(vals * weight[..., None], axis=-2)
-    cuts = np.cumsum([t.shape[-1] for t in flat])[:-1]
-    return tuple(o.reshape(o.shape[:-1] + t.shape[1:])
-                 for o, t in zip(jnp.split(out, cuts, axis=-1), tables))
-
-
-def _pair(f, pattern=(0, 1)):
-    """(1 − f, f) on a new last axis, taken in the order of `pattern` (0: 1 − f, 1: f), as
-    one broadcast expression (c + f·s with c, s ∈ {1, 0}, {−1, 1}: exact)."""
-    p = np.asarray(pattern)
-    return jnp.asarray(1 - p, f.dtype) + f[..., None] * jnp.asarray(2 * p - 1, f.dtype)
-
-
 def _bilinear(tab, x, y):
     """tab[(x, y) ∈ [0, 1]², ...] read bilinearly on its uniform grid."""
     def cell(v, n):
@@ -297,10 +276,11 @@ def _bilinear(tab, x, y):
     x, y = jnp.broadcast_arrays(jnp.asarray(x), jnp.asarray(y))
     i0, fx = cell(x, n_x)
     j0, fy = cell(y, n_y)
-    # flat taps (i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)
-    index = (i0 * n_y + j0)[..., None] + np.array([0, n_y, 1, n_y + 1], np.int32)
-    weight = _pair(fx, (0, 1, 0, 1)) * _pair(fy, (0, 0, 1, 1))
-    return read_taps((tab.reshape((n_x * n_y,) + tab.shape[2:]),), index, weight)[0]
+    extra = (1,) * (tab.ndim - 2)
+    fx, fy = fx.reshape(fx.shape + extra), fy.reshape(fy.shape + extra)
+    a0 = tab[i0, j0] * (1 - fx) + tab[i0 + 1, j0] * fx
+    a1 = tab[i0, j0 + 1] * (1 - fx) + tab[i0 + 1, j0 + 1] * fx
+    return a0 * (1 - fy) + a1 * fy
 
 
 def lookup_bins(table: BinTable, cos_o, alpha):

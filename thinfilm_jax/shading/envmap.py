@@ -35,8 +35,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from ..realtime.improved import _pair
-
 DATA = Path(__file__).resolve().parents[1] / "data" / "envmaps"
 SHIPPED = {
     "venice_sunset": DATA / "venice_sunset_256.hdr",
@@ -198,10 +196,14 @@ def lookup_nearest(image, omega) -> Array:
     return image[i, j]
 
 
-def _bilinear_cell(omega, h: int, w: int):
-    """The bilinear cell of texel centres around ω on an (h, w) map: rows i0, i0 + 1,
-    columns j0, j1 (wrapped in φ) and the fractions (fx, fy) from (j0, i0); rows clamp at
-    the poles."""
+def lookup_bilinear(image, omega, layer=None) -> Array:
+    """Bilinear interpolation of texel-centre values at ω (wraps in φ, clamps at the poles).
+
+    image: (h, w, ...) or, with `layer` (integer array broadcasting with ω's leading
+    axes), a stack (L, h, w, ...) read at image[layer]."""
+    if layer is None:
+        image, layer = image[None], jnp.zeros(omega.shape[:-1], jnp.int32)
+    h, w = image.shape[1], image.shape[2]
     u, v = to_equirect(omega)
     x = u * w - 0.5
     y = jnp.clip(v * h - 0.5, 0.0, h - 1.0)
@@ -210,34 +212,12 @@ def _bilinear_cell(omega, h: int, w: int):
     j0 = jnp.mod(x0.astype(jnp.int32), w)
     j1 = jnp.mod(j0 + 1, w)
     i0 = y0.astype(jnp.int32)
-    return i0, i0 + 1, j0, j1, fx, fy
-
-
-def lookup_bilinear(image, omega, layer=None) -> Array:
-    """Bilinear interpolation of texel-centre values at ω (wraps in φ, clamps at the poles).
-
-    image: (h, w, ...) or, with `layer` (integer array broadcasting with ω's leading
-    axes), a stack (L, h, w, ...) read at image[layer]."""
-    if layer is None:
-        image, layer = image[None], jnp.zeros(omega.shape[:-1], jnp.int32)
-    i0, i1, j0, j1, fx, fy = _bilinear_cell(omega, image.shape[1], image.shape[2])
+    i1 = i0 + 1
     fx = fx.reshape(fx.shape + (1,) * (image.ndim - 3))
     fy = fy.reshape(fy.shape + (1,) * (image.ndim - 3))
     top = image[layer, i0, j0] * (1 - fx) + image[layer, i0, j1] * fx
     bot = image[layer, i1, j0] * (1 - fx) + image[layer, i1, j1] * fx
     return top * (1 - fy) + bot * fy
-
-
-def bilinear_taps(omega, h: int, w: int):
-    """The four taps of `lookup_bilinear` on an (h, w) map as flat texel indices
-    i·w + j (..., 4) and weights (..., 4) summing to 1, for one gather of a table stored
-    (h·w, channels): Σ_t weight_t · table[index_t] is the bilinear value (same cell, same
-    fractions; the products are only ordered differently)."""
-    i0, _, j0, _, fx, fy = _bilinear_cell(omega, h, w)
-    # taps (i0, j0), (i0, j1), (i1, j0), (i1, j1) as broadcast expressions (no stack)
-    di, dj = np.array([0, 0, 1, 1], np.int32), np.array([0, 1, 0, 1], np.int32)
-    index = (i0[..., None] + di) * w + jnp.mod(j0[..., None] + dj, w)
-    return index, _pair(fx, dj) * _pair(fy, di)
 
 
 def downsample(envmap, factor: int) -> EnvMap:

@@ -62,7 +62,7 @@ from ..spectral.khr import khr_bands
 from ..spectral.lut import build_shat_lut
 from ..realtime.options import ModelOptions, check_options
 from .prefilter import (PrefilteredEnvMap, bin_radiance, lookup_albedo, lookup_prefiltered,
-                        lookup_radiance, moments_to_mean_cov, prefilter_envmap)
+                        moments_to_mean_cov, prefilter_envmap)
 from .sources import source_radiance
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from ..spectral.uplift import cross_band_name
@@ -247,10 +247,7 @@ def _map_points(film, alpha, normal, view, pref, cfg):
     co = jnp.where(up, cos_o, 1.0)
     refl = 2 * co[..., None] * normal - view
     sqa = jnp.sqrt(alpha)
-    if method in ("ideal", "khr"):  # the radiance alone: no read of the moments
-        rad, mom = lookup_radiance(pref, refl, sqa), None
-    else:
-        rad, mom = lookup_prefiltered(pref, refl, sqa)
+    rad, mom = lookup_prefiltered(pref, refl, sqa)
     a = lookup_albedo(pref, co, sqa)
     if method == "khr":  # per channel: Rec. 709 F_iridescence(cos θ_o) × the map's RGB
         return jnp.where(up[..., None], a[..., None] * khr_bands(film, co) * rad, 0.0)

@@ -49,10 +49,10 @@ import numpy as np
 from jax import Array
 
 from ..core import _validate as V
-from .envmap import (EnvMap, bilinear_taps, downsample, load_envmap, luminance_weights,
+from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance_weights,
                      texel_centers, texel_solid_angles)
 from ..optics.fresnel import complex_dtype, safe_sqrt
-from ..realtime.improved import _bilinear, _pair, lookup_lobe, read_taps
+from ..realtime.improved import _bilinear, lookup_lobe
 from ..spectral.lut import ShatLUT, build_shat_lut
 from ..brdf.microfacet import albedo, normal_distribution, smith_g2
 from .sources import Sources, extract_sources, with_film_tables
@@ -224,32 +224,24 @@ def _level_lerp(pref: PrefilteredEnvMap, sqrt_alpha):
     return i0.astype(jnp.int32), t - i0
 
 
-def _level_taps(pref: PrefilteredEnvMap, direction, sqrt_alpha):
-    """The 8 taps of a read (bilinear in direction on levels l and l + 1, linear in √α
-    between them) as flat indices into a table stored (L·h·w, channels) and weights
-    (..., 8) summing to 1."""
-    _, h, w = pref.radiance.shape[:3]
+def _read_levels(pref: PrefilteredEnvMap, table, direction, sqrt_alpha):
+    """`table` (L, h, w, ...) bilinear in direction, linear in √α between levels."""
     i0, f = _level_lerp(pref, sqrt_alpha)
-    index, weight = bilinear_taps(direction, h, w)  # (..., 4)
-    i0, f = jnp.broadcast_to(i0, index.shape[:-1]), jnp.broadcast_to(f, index.shape[:-1])
-    level = np.array([0, 1], np.int32)  # levels l, l + 1 on a new axis before the taps
-    lerp = _pair(f)  # (1 − f, f)
-    index = (i0[..., None, None] + level[:, None]) * (h * w) + index[..., None, :]
-    weight = lerp[..., None] * weight[..., None, :]
-    return index.reshape(index.shape[:-2] + (8,)), weight.reshape(weight.shape[:-2] + (8,))
+    lo = lookup_bilinear(table, direction, i0)
+    hi = lookup_bilinear(table, direction, i0 + 1)
+    ff = f.reshape(f.shape + (1,) * (lo.ndim - f.ndim))
+    return lo * (1 - ff) + hi * ff
 
 
 def lookup_prefiltered(pref: PrefilteredEnvMap, omega_r, sqrt_alpha):
-    """(P (..., 3), moments (..., 9) or (..., 3, 9)) at the reflection direction and √α:
-    bilinear in direction, linear in √α between levels (one read of every channel)."""
-    return read_taps([t.reshape((-1,) + t.shape[3:]) for t in (pref.radiance, pref.moments)],
-                     *_level_taps(pref, omega_r, sqrt_alpha))
+    """(P (..., 3), moments (..., 9) or (..., 3, 9)) at the reflection direction and √α."""
+    return tuple(_read_levels(pref, t, omega_r, sqrt_alpha)
+                 for t in (pref.radiance, pref.moments))
 
 
 def lookup_radiance(pref: PrefilteredEnvMap, direction, sqrt_alpha):
     """P (..., 3) alone (no moments) at a direction and √α."""
-    return read_taps([pref.radiance.reshape((-1, 3))],
-                     *_level_taps(pref, direction, sqrt_alpha))[0]
+    return _read_levels(pref, pref.radiance, direction, sqrt_alpha)
 
 
 def lookup_albedo(pref: PrefilteredEnvMap, cos_o, sqrt_alpha):

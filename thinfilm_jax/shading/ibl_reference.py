@@ -128,28 +128,6 @@ def resample_factor(height: int, alpha_min: float, max_height: int | None) -> in
 
 
 # ----------------------------------------------------------------------------- host tables
-@functools.lru_cache(maxsize=8)
-def texel_nodes(h: int, w: int, s: int):
-    """Quadrature of the piecewise-constant map: directions (h·w·s², 3), weights (…,) in sr
-    (Gauss–Legendre in cos θ and φ inside each texel, so Σ weights over a texel = Ω), and
-    the flat texel index of each node. Host float64."""
-    x, wt = np.polynomial.legendre.leggauss(s)
-    x, wt = (x + 1) / 2, wt / 2
-    ct, _ = _row_geometry(h, w)
-    u = ct[:-1, None] + (ct[1:] - ct[:-1])[:, None] * x[None]  # (h, s) cos θ nodes
-    wu = (ct[:-1] - ct[1:])[:, None] * wt[None]
-    phi = (np.arange(w)[:, None] + x[None]) * 2 * np.pi / w  # (w, s)
-    wphi = np.full((w, s), 2 * np.pi / w) * wt[None]
-    st = np.sqrt(np.maximum(1 - u * u, 0))
-    d = np.stack([st[:, None, :, None] * np.cos(phi)[None, :, None, :],
-                  st[:, None, :, None] * np.sin(phi)[None, :, None, :],
-                  np.broadcast_to(u[:, None, :, None], (h, w, s, s))], axis=-1)
-    wgt = wu[:, None, :, None] * wphi[None, :, None, :]
-    idx = np.broadcast_to((np.arange(h)[:, None] * w + np.arange(w)[None])[:, :, None, None],
-                          (h, w, s, s))
-    return d.reshape(-1, 3), wgt.reshape(-1), idx.reshape(-1)
-
-
 @functools.lru_cache(maxsize=16)
 def sub_nodes(h: int, w: int, s: int):
     """Gauss–Legendre sub-nodes of each row and column: cos θ (h, s), its weights (h, s),
@@ -160,7 +138,23 @@ def sub_nodes(h: int, w: int, s: int):
     u = ct[:-1, None] + (ct[1:] - ct[:-1])[:, None] * x[None]
     wu = (ct[:-1] - ct[1:])[:, None] * wt[None]
     phi = (np.arange(w)[:, None] + x[None]) * 2 * np.pi / w
-    return u, wu, np.cos(phi), np.sin(phi), wt * 2 * np.pi / w
+    return u, wu, np.cos(phi), np.sin(phi), (2 * np.pi / w) * wt
+
+
+@functools.lru_cache(maxsize=8)
+def texel_nodes(h: int, w: int, s: int):
+    """Quadrature of the piecewise-constant map: directions (h·w·s², 3), weights (…,) in sr
+    (`sub_nodes` in every texel: Gauss–Legendre in cos θ and φ, so Σ weights over a texel
+    = Ω), and the flat texel index of each node. Host float64."""
+    u, wu, cphi, sphi, wphi = sub_nodes(h, w, s)
+    st = np.sqrt(np.maximum(1 - u * u, 0))
+    d = np.stack([st[:, None, :, None] * cphi[None, :, None, :],
+                  st[:, None, :, None] * sphi[None, :, None, :],
+                  np.broadcast_to(u[:, None, :, None], (h, w, s, s))], axis=-1)
+    wgt = wu[:, None, :, None] * wphi[None, None, None, :]
+    idx = np.broadcast_to((np.arange(h)[:, None] * w + np.arange(w)[None])[:, :, None, None],
+                          (h, w, s, s))
+    return d.reshape(-1, 3), np.broadcast_to(wgt, (h, w, s, s)).reshape(-1), idx.reshape(-1)
 
 
 # ----------------------------------------------------------------------------- kernels
@@ -474,7 +468,7 @@ def _adaptive_point(table, a, n, wo, geo, rad, cfg):
     g = g_of(t1)  # (T_B, J·3)
     total = _contract(g, eff[:-1], cross)
     bb = texels[4].shape[-1]  # texels per block
-    if (k2 == 0 and bb > 1) or k3 == 0 and (k2 == 0 or bb == 1):
+    if not (k2 if bb > 1 else k3):  # nothing refined (one-texel blocks go to level 3)
         return total, jnp.zeros((), total.dtype)
     ws = _peak_weight(t1, a, sin_r[:-1])
     ws_nb = jnp.max(jnp.concatenate([ws, jnp.zeros((1,), ws.dtype)])[nb[:-1]], axis=-1)

@@ -17,9 +17,13 @@ setup: $(STAMP)
 figure7: $(STAMP)
 	$(BIN)/thinfilm-jax figure7 --out figures
 
-# two pytest-xdist workers (the CI machine has 2 cores); work units: tests/conftest.py
+# two pytest-xdist workers (the CI machine has 2 cores); work units: tests/conftest.py. The
+# run ends with where its time went (per file and the 20 longest tests: JAX tracing, lowering,
+# XLA compilation, the rest; tests/_compile_report.py), from .test-time/ (git-ignored).
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=20
+	@rm -rf .test-time && mkdir -p .test-time
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --jax-time-report=.test-time/run; \
+	  rc=$$?; $(BIN)/python tests/_compile_report.py .test-time/run 20; exit $$rc
 
 bench: $(STAMP)
 	$(BIN)/thinfilm-jax bench --out figures

@@ -7,20 +7,7 @@ import os
 import shutil
 import tempfile
 
-# XLA compilation is ~80 % of the suite's time (`make test` prints the split: trace, lower,
-# XLA compile, the rest; tests/_compile_report.py). LLVM's optimisation level is set to 0
-# for the tests: the HLO passes (fusion, the precision of every contraction, layouts) are the
-# same as a user's, only the machine code is less optimised, which saves ~20 % of the XLA
-# compile time (measured: tests/optics/test_fresnel_airy.py 12.7 → 9.8 s of compile, quiet
-# 2-core machine) and costs little run time (the tests' arrays are small). Set before JAX's
-# backend starts, inherited by the notebook kernels and CLI subprocesses the tests start;
-# THINFILM_JAX_TEST_FULL_OPT=1 (or an XLA_FLAGS that sets the level) keeps XLA's default.
-# Timings are never taken from the tests: `thinfilm-jax bench` compiles at the default level.
-_LEVEL = "--xla_backend_optimization_level"
-if not os.environ.get("THINFILM_JAX_TEST_FULL_OPT") and _LEVEL not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_LEVEL}=0".strip()
-
-import jax  # noqa: E402
+import jax
 
 jax.config.update("jax_enable_x64", True)
 

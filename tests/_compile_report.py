@@ -31,19 +31,24 @@ class TimeReport:
 
         self.path = path
         self.totals = collections.defaultdict(float)
+        self.programs = []  # (function name, XLA compile s) of the programs compiled so far
         self.rows = {}
         self.out = None
         jax.monitoring.register_event_duration_secs_listener(self._event)
 
-    def _event(self, event, duration, **_):
+    def _event(self, event, duration, fun_name="?", **_):
         if event in EVENTS:
             self.totals[EVENTS[event]] += duration
+            if EVENTS[event] == "compile":
+                self.programs.append((str(fun_name), duration))
 
     def _phase(self, item):
-        before, t0 = dict(self.totals), time.perf_counter()
+        before, t0, n = dict(self.totals), time.perf_counter(), len(self.programs)
         yield
-        row = self.rows.setdefault(item.nodeid, {"wall": 0.0, **{k: 0.0 for k in EVENTS.values()}})
+        row = self.rows.setdefault(item.nodeid, {"wall": 0.0, **{k: 0.0 for k in EVENTS.values()},
+                                                 "programs": []})
         row["wall"] += time.perf_counter() - t0
+        row["programs"] += [[f, round(s, 3)] for f, s in self.programs[n:]]
         for k in EVENTS.values():
             row[k] += self.totals[k] - before.get(k, 0.0)
 
@@ -98,6 +103,18 @@ def summary(path: str, top: int = 30) -> str:
     out += [line(f, r) for f, r in sorted(per_file.items(), key=lambda kv: -kv[1]["wall"])]
     out += ["", f"The {top} longest tests:", "", *head]
     out += [line(n, r) for n, r in sorted(rows.items(), key=lambda kv: -kv[1]["wall"])[:top]]
+    # the programs by name: how often the run compiled a program of that name, and for how long
+    # (a name compiled many times is a candidate for one shared callable or fixed shapes)
+    programs = collections.defaultdict(lambda: [0, 0.0, set()])
+    for nodeid, r in rows.items():
+        for name, s in r.get("programs", ()):
+            p = programs[name]
+            p[0], p[1] = p[0] + 1, p[1] + s
+            p[2].add(nodeid.split("::")[0])
+    out += ["", f"The {top} programs with the most XLA compile time:", "",
+            "| program | compiles | XLA compile s | files |", "|---|---:|---:|---|"]
+    out += [f"| {n} | {c} | {s:.1f} | {len(files)} |"
+            for n, (c, s, files) in sorted(programs.items(), key=lambda kv: -kv[1][1])[:top]]
     return "\n".join(out)
 
 

@@ -11,29 +11,42 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-# JAX's persistent compilation cache in a fresh folder per test run, removed at the end:
-# hermetic (nothing is read from or written to the user's cache, ~/.cache/thinfilm_jax), and
-# a program compiled twice in one run — by two callables that trace the same program, by the
-# CLI and the notebook kernels the tests start (they call `enable_compilation_cache()`, which
-# reads THINFILM_JAX_CACHE_DIR), or by the two pytest-xdist workers — compiles once. The
-# folder is made by the first process (pytest itself, or xdist's controller) and inherited
-# through the environment by the workers and subprocesses; the process that made it removes
-# it. tests/core/test_compilation_cache.py runs its subprocesses with folders of its own.
-if "THINFILM_JAX_TEST_CACHE" not in os.environ:
+# JAX's persistent compilation cache, shared by every process of a test run — the two
+# pytest-xdist workers, the CLI and notebook kernels the tests start (they call
+# `enable_compilation_cache()`, which reads THINFILM_JAX_CACHE_DIR) — and kept between runs
+# in the checkout's git-ignored .test-cache/jax (emptied when a run starts with more than
+# 2 GiB in it), so the edit–test loop compiles only what changed. Hermetic all the same: nothing
+# is read from or written to the user's cache (~/.cache/thinfilm_jax), and an entry is keyed
+# by the program's HLO, the compile options and the JAX/XLA version, so a hit is the program
+# a compile would produce (programs and their numbers do not depend on the cache). Every
+# program is stored, not only those over JAX's default 1 s. THINFILM_JAX_TEST_CACHE=fresh
+# gives a folder of the run's own, removed at the end (a clean clone's cost: what .ci/run
+# measures); any other value is a folder to use. tests/core/test_compilation_cache.py runs
+# its subprocesses with folders of its own.
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_cache = os.environ.get("THINFILM_JAX_TEST_CACHE") or os.path.join(_ROOT, ".test-cache", "jax")
+if _cache == "fresh":
     _cache = tempfile.mkdtemp(prefix="thinfilm-jax-test-cache-")
-    os.environ["THINFILM_JAX_TEST_CACHE"] = _cache
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)
-os.environ["THINFILM_JAX_CACHE_DIR"] = os.environ["THINFILM_JAX_TEST_CACHE"]
+elif "PYTEST_XDIST_WORKER" not in os.environ and os.path.isdir(_cache):
+    if sum(e.stat().st_size for e in os.scandir(_cache) if e.is_file()) > 2 << 30:
+        shutil.rmtree(_cache, ignore_errors=True)
+os.makedirs(_cache, exist_ok=True)
+os.environ["THINFILM_JAX_TEST_CACHE"] = _cache  # inherited by the workers and subprocesses
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"  # the subprocesses too
+os.environ["THINFILM_JAX_CACHE_DIR"] = _cache
 os.environ["THINFILM_JAX_NO_CACHE"] = ""
-jax.config.update("jax_compilation_cache_dir", os.environ["THINFILM_JAX_TEST_CACHE"])
+jax.config.update("jax_compilation_cache_dir", _cache)
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 import pytest  # noqa: E402
 
 # Work units of `pytest -n 2 --dist loadfile` (the Makefile's `make test`): one per test file,
 # so that a module's fixtures and the programs its tests share are built once, in one
 # worker; tests that share nothing expensive with their file get units of their own, so that
-# long tests run on both workers: each notebook runs in its own kernel, and the stiff grids of
-# tests/studies/test_stability.py share one compiled group per dtype (`stability._patch_group`).
+# long tests run on both workers: each notebook runs in its own kernel, and each stiff patch
+# grid of tests/studies/test_stability.py is one compiled program (`stability._patch_variant`)
+# while its other checks share one per dtype (`stability._rgb_group`).
 # Long tests that build everything they need themselves (no module fixture, no program
 # another test of their file compiles): one unit per parametrisation. The persistent
 # compilation cache above still shares a program two units trace alike.
@@ -45,18 +58,16 @@ ALONE = ("tests/shading/test_ibl.py::test_stiff_inputs_finite_and_bounded[",
 def _unit(nodeid: str) -> str:
     path, _, name = nodeid.partition("::")
     if (path.endswith("test_notebooks.py") or name == "test_fitting_notebook_executes"
-            or nodeid.startswith(ALONE)):
+            or nodeid.startswith(ALONE) or name.startswith("test_stiff_inputs[patch_radiance")):
         return nodeid
-    if path.endswith("test_stability.py"):
-        # the patch grids (one shared compiled group per dtype) apart from the other checks
-        group = "patch" if name.startswith("test_stiff_inputs[patch_radiance") else "other"
-        return f"{path}:{'float32' if nodeid.endswith('-float32]') else 'float64'}:{group}"
+    if path.endswith("test_stability.py"):  # the other checks: one unit per dtype
+        return f"{path}:{'float32' if nodeid.endswith('-float32]') else 'float64'}"
     return path
 
 
-# Units known to be long start first (notebooks ≈ 1 min each, a stiff patch grid ≈ 1 min per
-# dtype on the 2-core machine; matched anywhere in the unit): xdist's own order (most tests first) would start single-test
-# units last and leave one worker alone with a long test at the end.
+# Units known to be long start first (notebooks ≈ 1 min each on the 2-core machine, the stiff
+# grids; matched anywhere in the unit): xdist's own order (most tests first) would start
+# single-test units last and leave one worker alone with a long test at the end.
 FIRST = ("tests/test_notebooks.py::", "tests/fit/test_fit.py::test_fitting_notebook_executes",
          "tests/studies/test_stability.py:", "tests/shading/test_ibl.py::test_stiff_inputs_finite_and_bounded[")
 

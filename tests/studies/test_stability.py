@@ -5,8 +5,8 @@ inputs (`thinfilm_jax.studies.stiff.STIFF_*`: d ∈ {0, 1e-6, 500, 1e4, 1e5} nm;
 4; κ₃ ∈ {0, 1e-12, 50}; θ ∈ {0, 1e-9, 0.7, 1.2, π/2 − 1e-9, π/2}; α ∈ {1e-4, 0.3, 1};
 η₁ > η₂ with total internal reflection; σ_D up to 1e9 nm), with the gradient (a VJP with an
 all-ones cotangent, i.e. jax.grad of the sum, reverse mode as users call it) w.r.t. every
-`Film` field and every other input (the six `patch_radiance` variants share one reverse pass:
-compile time dominates this file). The checks live in `thinfilm_jax.studies.stability` so
+`Film` field and every other input (compile time dominates this file: one program per
+`patch_radiance` variant, the LUT an argument of the compiled call, not a constant in it). The checks live in `thinfilm_jax.studies.stability` so
 that the markdown report (`thinfilm-jax bench` → figures/stability_report.md, or
 `python -m thinfilm_jax.studies.stability`) shows exactly what is asserted here:
 

@@ -222,7 +222,10 @@ _CHILD = textwrap.dedent("""
 def _run_children(n_processes, devices_each, cases, patch, fit, timeout=180):
     env = {k: v for k, v in os.environ.items() if not k.startswith(("XLA_", "JAX_"))}
     env.update(XLA_FLAGS=f"--xla_force_host_platform_device_count={devices_each}",
-               JAX_PLATFORMS="cpu", PYTHONPATH=ROOT)
+               JAX_PLATFORMS="cpu", PYTHONPATH=ROOT,
+               # the test run's compilation cache (tests/conftest.py): a rerun reads them
+               JAX_COMPILATION_CACHE_DIR=os.environ["THINFILM_JAX_TEST_CACHE"],
+               JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
     code = f"CASES = {cases!r}\nPATCH = {patch!r}\nFIT = {fit!r}\n" + _CHILD
     if n_processes > 1:
         with socket.socket() as s:

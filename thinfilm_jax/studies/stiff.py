@@ -123,7 +123,7 @@ def value_and_grads(fn, args: tuple, names: tuple[str, ...], consts: tuple = ())
     the per-case derivative of the sum over its outputs (bands, real and imaginary parts).
     `consts` (tables: pytrees of arrays) are not differentiated and reach the compiled call
     as arguments: a table closed over by `fn` would be a constant compiled into the program
-    (the Ŝ LUT: 8.5 MB of HLO text and twice the compile time).
+    (the Ŝ LUT: 8.5 MB of HLO text).
     """
     def real_fn(*a):
         y = fn(*a)

@@ -25,6 +25,7 @@ interference out, leaving the same C₀ in every band):
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jax import Array
 
@@ -78,22 +79,58 @@ def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, term
 def _lut_bands_under_light(film, cos_mean, opd, observer, terms, lut, arithmetic,
                            interpolation, light):
     """Σ_k light_k R_jk: the cross-band table split by light channel k (bands j·k, k
-    fastest), one J-band K 29 per channel; XLA shares the film terms between them."""
+    fastest), one J-band K 29 per channel (`_read_orders`) on the film terms computed once."""
     n_light = light.shape[-1]
     s0 = shat_at_zero(observer, jnp.result_type(cos_mean, float), "exact")
+    ft = fused_terms(film, cos_mean, arithmetic=arithmetic)
     out = None
     for k in range(n_light):
         lut_k = ShatLUT(lut.table[..., k::n_light], lut.carrier[k::n_light], lut.mu_max,
                         lut.sigma_max)
-        r = _lut_bands(film, cos_mean, opd, observer, terms, lut_k, arithmetic,
-                       interpolation, s0[k::n_light]) * light[..., k:k + 1]
+        r = _read_orders(ft, s0[k::n_light], terms, opd, lut_k, interpolation)
+        r = r * light[..., k:k + 1]
         out = r if out is None else out + r
     return out
 
 
+def _read_orders(ft, s0, terms, opd, lut, interpolation):
+    r"""C₀ Ŝ_j(0) + Σ_m Re(W_m conj Ŝ_j(mμ_D, m²σ_D²)), W_m = Σ_{s,p} (R* − T₁₂₁) z^m.
+
+    Reads of 4 taps (bilinear, or σ = 0) are the steps of a `lax.scan` over m (z^m
+    carried), which XLA compiles into one loop per order: unrolled, two such reads (and the
+    K bins of `improved`) fuse into one loop that XLA's CPU backend compiles to slow code
+    (`ideal_kernel` 1.7× slower, `improved_kernel` 3×: figures/kernel_bench.md). The 16-tap
+    bicubic reads are unrolled: one loop of both orders is as fast as two, or faster (under a
+    map's light). The same sum either way. `ft`: `series.fused_terms` at the mean cosine."""
+    c0 = 0.5 * (ft.c0[0] + ft.c0[1])
+    mean, std = opd
+    shape = jnp.broadcast_shapes(c0.shape, mean.shape, *(() if std is None else (std.shape,)))
+    out = jnp.broadcast_to(c0[..., None] * jnp.reshape(s0, (1,) * c0.ndim + (-1,)),
+                           shape + s0.shape[-1:])
+
+    def order(carry, m):  # carry: the sum so far and z^(m−1) per polarisation
+        out, pr, pi = carry
+        pr, pi = (tuple(a * c - b * d for a, b, c, d in zip(pr, pi, ft.z_re, ft.z_im)),
+                  tuple(a * d + b * c for a, b, c, d in zip(pr, pi, ft.z_re, ft.z_im)))
+        wr = ft.amp[0] * pr[0] + ft.amp[1] * pr[1]
+        wi = ft.amp[0] * pi[0] + ft.amp[1] * pi[1]
+        sr, si = read_parts(lut, m * mean, None if std is None else m * std,
+                            interpolation=interpolation)
+        return (out + (wr[..., None] * sr + wi[..., None] * si), pr, pi), None
+
+    one, zero = jnp.ones(shape, c0.dtype), jnp.zeros(shape, c0.dtype)
+    carry = (out, (one, one), (zero, zero))
+    if interpolation == "cubic" and std is not None:
+        for m in range(1, terms + 1):
+            carry, _ = order(carry, m)
+        return carry[0]
+    ms = jnp.arange(1, terms + 1, dtype=mean.dtype)
+    return jax.lax.scan(order, carry, ms)[0][0]
+
+
 def _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic, interpolation,
                shat0=None):
-    r"""K 29 with Ŝ from the LUT as one elementwise program (XLA fuses it into one loop).
+    r"""K 29 with Ŝ from the LUT on real parts (`series.fused_terms`, then `_read_orders`).
 
     The polarisation mean is taken before the bands: with W_m = Σ_{s,p} (R* − T₁₂₁) z^m
     (complex, per shading point) and Ŝ(−mμ) = conj Ŝ(mμ),
@@ -103,20 +140,6 @@ def _lut_bands(film, cos_mean, opd, observer, terms, lut, arithmetic, interpolat
 
     the same sum as `series.fourier_band_reflectance` (half the band work)."""
     dtype = jnp.result_type(cos_mean, float)
-    ft = fused_terms(film, cos_mean, arithmetic=arithmetic)
-    mean, std = opd
     s0 = shat_at_zero(observer, dtype, "exact") if shat0 is None else shat0.astype(dtype)
-    c0 = 0.5 * (ft.c0[0] + ft.c0[1])
-    w = []  # W_m on real parts
-    pr, pi = ft.z_re, ft.z_im  # z^m per polarisation
-    for m in range(1, terms + 1):
-        if m > 1:
-            pr, pi = (tuple(a * c - b * d for a, b, c, d in zip(pr, pi, ft.z_re, ft.z_im)),
-                      tuple(a * d + b * c for a, b, c, d in zip(pr, pi, ft.z_re, ft.z_im)))
-        w.append((ft.amp[0] * pr[0] + ft.amp[1] * pr[1], ft.amp[0] * pi[0] + ft.amp[1] * pi[1]))
-    out = c0[..., None] * jnp.reshape(s0, (1,) * c0.ndim + (-1,))
-    for m, (wr, wi) in enumerate(w, start=1):
-        sr, si = read_parts(lut, m * mean, None if std is None else m * std,
-                            interpolation=interpolation)
-        out = out + (wr[..., None] * sr + wi[..., None] * si)
-    return out
+    return _read_orders(fused_terms(film, cos_mean, arithmetic=arithmetic), s0, terms, opd,
+                        lut, interpolation)

@@ -111,8 +111,8 @@ from ..brdf.microfacet import PatchQuadrature, light_moments, patch_quadrature
 from ..optics.opd import OPDMoments, opd_of_cos
 from ..spectral.spectra import DEFAULT_OBSERVER
 
-__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "improved_bins",
-           "improved_bands", "improved_kernel"]
+__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "bin_bands", "scan_bins",
+           "improved_bins", "improved_bands", "improved_kernel"]
 
 DEFAULT_BINS = 3
 TABLE_SHAPE = (64, 33)  # (√cos θ_o, √α) nodes, as the albedo table
@@ -311,12 +311,46 @@ def lookup_lobe(table: BinTable, normal, view, cos_o, alpha):
 
 
 # ----------------------------------------------------------------------------- kernel
-def _bin_bands(film: Film, c, s, observer, terms, shat, lut, arithmetic) -> Array:
-    """K 29 in one bin (mean c̄ = `c`, spread s), shape broadcast(film, c, s) + (J,)."""
+def bin_bands(film: Film, c, s, light=None, *, observer, terms, shat, lut,
+              arithmetic) -> Array:
+    """K 29 in one bin (mean c̄ = `c`, spread s), shape broadcast(film, c, s) + (J,);
+    with `light` (..., K) and a cross-band observer, Σ_k R_jk light_k (`filtered_bands`)."""
     d = opd_of_cos(film, c)
     slope = safe_div((2.0 * film.thickness * film.eta_outer) ** 2 * c, d)  # D'(c)
     return filtered_bands(film, c, OPDMoments(d, jnp.abs(slope) * s), observer, terms=terms,
-                          shat=shat, lut=lut, arithmetic=arithmetic, interpolation="linear")
+                          shat=shat, lut=lut, arithmetic=arithmetic, interpolation="linear",
+                          light=light)
+
+
+def scan_bins(film: Film, cos_bins, std_bins, bands, *, extra=None,
+              stack: bool = False) -> Array:
+    """The K bins as the steps of a `lax.scan`: Σ_k bands(film, c̄_k, s_k[, extra_k]), or
+    the K terms stacked on axis −2 when `stack`.
+
+    `film` broadcasts with the leading axes of `cos_bins`, `std_bins` (..., K); `extra`
+    (K, ..., C), bins first, is sliced per bin (e.g. each bin's light). XLA compiles each
+    step into loops of its own: the K bins unrolled fuse into one loop that XLA's CPU backend
+    compiles to slow code (`improved_kernel` 3.0× slower, `envmap_radiance(method=
+    "improved")` 1.2×: figures/kernel_bench.md), at the same results. A bin axis broadcast
+    against the film would be materialised instead."""
+    cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
+    k = max(cos_bins.shape[-1], std_bins.shape[-1])
+    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in film), cos_bins.shape[:-1],
+                                 std_bins.shape[:-1],
+                                 *(() if extra is None else (jnp.shape(extra)[1:-1],)))
+    film = Film(*(jnp.broadcast_to(jnp.asarray(x), shape) for x in film))
+    xs = [jnp.moveaxis(jnp.broadcast_to(x, shape + (k,)), -1, 0) for x in (cos_bins, std_bins)]
+    if extra is not None:
+        xs.append(jnp.broadcast_to(extra, (k,) + shape + jnp.shape(extra)[-1:]))
+
+    def one(x):
+        return bands(film, *x)
+
+    if stack:
+        return jnp.moveaxis(jax.lax.scan(lambda _, x: (None, one(x)), None, xs)[1], 0, -2)
+    out = jax.eval_shape(one, [x[0] for x in xs])
+    return jax.lax.scan(lambda total, x: (total + one(x), None),
+                        jnp.zeros(out.shape, out.dtype), xs)[0]
 
 
 def improved_bins(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
@@ -332,16 +366,11 @@ def improved_bins(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
         terms: M Fourier orders.
         shat: "lut" (bilinear read of `lut`), "exact" or "gaussian".
         arithmetic: "complex" or "real" (κ₃ = 0 only) Fresnel arithmetic.
-    Each bin is its own per-point program (the bins are not broadcast against the film on a
-    bin axis, which XLA would materialise); the K results are stacked last.
+    The bins are the steps of one loop (`scan_bins`), stacked on axis −2.
     """
-    cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
-    k = max(cos_bins.shape[-1], std_bins.shape[-1])
-    cos_bins = jnp.broadcast_to(cos_bins, cos_bins.shape[:-1] + (k,))
-    std_bins = jnp.broadcast_to(std_bins, std_bins.shape[:-1] + (k,))
-    film = Film(*(jnp.asarray(x) for x in film))
-    return jnp.stack([_bin_bands(film, cos_bins[..., b], std_bins[..., b], observer, terms,
-                                 shat, lut, arithmetic) for b in range(k)], axis=-2)
+    return scan_bins(film, cos_bins, std_bins, functools.partial(
+        bin_bands, observer=observer, terms=terms, shat=shat, lut=lut,
+        arithmetic=arithmetic), stack=True)
 
 
 def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
@@ -349,18 +378,11 @@ def improved_bands(film: Film, cos_bins, std_bins, observer=DEFAULT_OBSERVER, *,
                    arithmetic: str = "complex") -> Array:
     """The mean of `improved_bins` over the K equal-probability bins: R̄_j (..., J), the
     model under uniform light. Arguments as `improved_bins`; the bins are summed as they are
-    computed (no bin axis)."""
-    cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
-    k = max(cos_bins.shape[-1], std_bins.shape[-1])
-    cos_bins = jnp.broadcast_to(cos_bins, cos_bins.shape[:-1] + (k,))
-    std_bins = jnp.broadcast_to(std_bins, std_bins.shape[:-1] + (k,))
-    film = Film(*(jnp.asarray(x) for x in film))
-    total = None
-    for b in range(k):
-        r = _bin_bands(film, cos_bins[..., b], std_bins[..., b], observer, terms, shat, lut,
-                       arithmetic)
-        total = r if total is None else total + r
-    return total * (1.0 / k)
+    computed (`scan_bins`, no bin axis)."""
+    k = max(jnp.shape(cos_bins)[-1], jnp.shape(std_bins)[-1])
+    return scan_bins(film, cos_bins, std_bins, functools.partial(
+        bin_bands, observer=observer, terms=terms, shat=shat, lut=lut,
+        arithmetic=arithmetic)) * (1.0 / k)
 
 
 def improved_kernel(film: Film, cos_o, alpha, table: BinTable, *,

@@ -56,12 +56,12 @@ from ..core.film import Film
 from .ibl_reference import (_interp, _lobe_cos_weight, _r_table,  # noqa: F401 (re-exported)
                             auto_subdivisions, exact_radiance, texel_nodes)
 from ..optics.fresnel import safe_sqrt
-from ..realtime.improved import BinTable, bin_table, improved_bins, lookup_bins
+from ..realtime.improved import BinTable, bin_bands, bin_table, lookup_bins, scan_bins
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..spectral.khr import khr_bands
 from ..spectral.lut import build_shat_lut
 from ..realtime.options import ModelOptions, check_options
-from .prefilter import (PrefilteredEnvMap, bin_radiance, lookup_albedo, lookup_prefiltered,
+from .prefilter import (PrefilteredEnvMap, bin_radiance_parts, lookup_albedo, lookup_prefiltered,
                         moments_to_mean_cov, prefilter_envmap)
 from .sources import source_radiance
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
@@ -322,13 +322,21 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
     a = lookup_albedo(pref, co, safe_sqrt(alpha))
-    rad = bin_radiance(pref, table, normal, view, co, alpha)  # (..., K, 3)
+    rad, shift = bin_radiance_parts(pref, table, normal, view, co, alpha)  # (K, ..., 3)
     cb, sb = lookup_bins(table, co, alpha)
     obs = cross_band_name(observer) if cross_band else observer
-    r = improved_bins(film, cb, sb, obs, terms=terms, shat=shat, lut=lut,
-                      arithmetic=arithmetic)  # (..., K, J[·3])
-    if cross_band:
-        out = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * rad[..., None, :], axis=-1)
-    else:
-        out = r * rad
-    return jnp.where(up[..., None], a[..., None] * jnp.mean(out, axis=-2), 0.0)
+
+    bands = functools.partial(bin_bands, observer=obs, terms=terms, shat=shat, lut=lut,
+                              arithmetic=arithmetic)
+
+    def under_light(film, c, s, read):  # the bin's film × its radiance P_k (..., 3)
+        light = read + shift
+        if cross_band and shat == "lut":  # Σ_c R_jc P_c, the table read per light channel
+            return bands(film, c, s, light)
+        r = bands(film, c, s)
+        if cross_band:
+            return jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * light[..., None, :], axis=-1)
+        return r * light
+
+    out = scan_bins(film, cb, sb, under_light, extra=rad)  # Σ_k (..., J)
+    return jnp.where(up[..., None], a[..., None] * out * (1.0 / cb.shape[-1]), 0.0)

@@ -265,12 +265,22 @@ def bin_radiance(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha):
     """The prefiltered radiance of each bin of the improved model (..., K, 3): read at the
     bin's mean light direction and equal-variance level (`improved.lookup_lobe`); where the
     bins are rings round ω_o (near normal view, ring weight w of `BinTable.ring`) their
-    mean is moved to the whole lobe's read (docs/improved.md). cos_o = ⟨n, ω_o⟩ > 0."""
+    mean is moved to the whole lobe's read (docs/improved.md). cos_o = ⟨n, ω_o⟩ > 0.
+    The sum of `bin_radiance_parts`."""
+    reads, shift = bin_radiance_parts(pref, table, normal, view, cos_o, alpha)
+    return jnp.moveaxis(reads + shift, 0, -2)
+
+
+def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha):
+    """`bin_radiance` as (the bins' reads (K, ..., 3), bins first, the shift (..., 3) that
+    moves their mean to the whole lobe's read, w (P − (1/K) Σ_k P_k)): the layout
+    `improved.scan_bins` steps through, the shift added in its steps (XLA would otherwise
+    fuse the K + 1 reads into every bin's sum)."""
     dirn, sqa_eff = lookup_lobe(table, normal, view, cos_o, alpha)  # (..., K + 1, 3), (..., K + 1)
-    rad = lookup_radiance(pref, dirn, sqa_eff)  # (..., K + 1, 3)
-    w = _bilinear(table.ring, safe_sqrt(cos_o), safe_sqrt(alpha))[..., None, None]
-    return rad[..., :-1, :] + w * (rad[..., -1:, :] - jnp.mean(rad[..., :-1, :], axis=-2,
-                                                              keepdims=True))
+    rad = lookup_radiance(pref, jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa_eff, -1, 0))
+    k = rad.shape[0] - 1  # rad: (K + 1, ..., 3), the whole lobe's read last
+    w = _bilinear(table.ring, safe_sqrt(cos_o), safe_sqrt(alpha))[..., None]
+    return rad[:k], w * (rad[k] - sum(rad[b] for b in range(k)) * (1.0 / k))
 
 
 def moments_to_mean_cov(m):

@@ -27,8 +27,8 @@ does two flops per point, no transcendental):
     >>> import jax, jax.numpy as jnp
     >>> c = cost_per_point(jax.jit(lambda x: x * 2.0 + 1.0), (jnp.ones(1024, jnp.float32),),
     ...                    1024)
-    >>> c["flops"], c["transcendentals"], c["bytes_accessed"]
-    (2.0, 0.0, 8.0)
+    >>> c["flops"], c["transcendentals"], c["bytes_accessed"], c["loops"]
+    (2.0, 0.0, 8.0, [])
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import re
 import subprocess
 import sys
 import time
@@ -149,12 +150,19 @@ def programs(pkg, pts, pref_np, envmap: bool = True):
 
 
 def cost_per_point(fn, args, n: int) -> dict:
-    """XLA's cost analysis of the compiled `fn(*args)`, divided by the point count."""
-    ca = fn.lower(*args).compile().cost_analysis()
+    """XLA's cost analysis of the compiled `fn(*args)`, divided by the point count, and the
+    known trip counts of its while loops (`loops`, in program order). XLA counts a loop's
+    body once (HloCostAnalysis::HandleWhile): where `loops` is not empty the figures are
+    one step of each loop plus what the loops carry, not the whole run."""
+    compiled = fn.lower(*args).compile()
+    ca = compiled.cost_analysis()
     ca = ca[0] if isinstance(ca, list) else ca
+    loops = [int(t) for t in re.findall(r' while\(.*?"known_trip_count":\{"n":"(\d+)"\}',
+                                        compiled.as_text())]
     return {"flops": ca.get("flops", 0.0) / n, "transcendentals":
             ca.get("transcendentals", 0.0) / n, "bytes_accessed": ca.get("bytes accessed",
-                                                                          0.0) / n}
+                                                                          0.0) / n,
+            "loops": loops}
 
 
 def peak_program():
@@ -255,19 +263,22 @@ def report_markdown(result: dict) -> str:
              f"{result['points']} float32 shading points; {env['devices']}, "
              f"{env['cpu_count']} CPUs, load average at start {env['load_average']}, "
              f"jax {env['jax']}, {env['date']}. Cost: XLA cost analysis of the compiled "
-             "program (deterministic). Time: minimum of "
+             "program (deterministic); XLA counts a while loop's body once, so where the "
+             "loops column lists trip counts (the table reads as loop steps) flops and bytes "
+             "are one step of each loop plus what the loops carry. Time: minimum of "
              f"{result['repeats']} interleaved warm calls (median in brackets; a shared, "
              f"noisy machine). Elementwise peak in the same run: "
              f"{result['peak_gflops_per_s']:.1f} GFLOP/s ({result['peak_loop']}).", ""]
     if result["baseline"]:
         lines += [f"old: {result['baseline']['path']} (commit {result['baseline']['commit']});"
                   f" new: commit {result['current_commit']}.", ""]
-    lines += ["| kernel | version | flops / pt | transcendentals / pt | bytes / pt "
+    lines += ["| kernel | version | flops / pt | transcendentals / pt | bytes / pt | loops "
               "| ns / pt | compile s | GFLOP/s | fraction of peak |",
-              "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+              "|---|---|---:|---:|---:|---|---:|---:|---:|---:|"]
     for r in sorted(result["rows"], key=lambda r: (KERNELS.index(r["kernel"]), r["version"])):
+        loops = " ".join(str(t) for t in r.get("loops", [])) or "–"
         lines.append(f"| {r['kernel']} | {r['version']} | {r['flops']:.0f} "
-                     f"| {r['transcendentals']:.1f} | {r['bytes_accessed']:.0f} "
+                     f"| {r['transcendentals']:.1f} | {r['bytes_accessed']:.0f} | {loops} "
                      f"| {r['ns_per_point']:.0f} ({r['ns_per_point_median']:.0f}) "
                      f"| {r['compile_s']:.1f} | {r['gflops_per_s']:.2f} "
                      f"| {r['fraction_of_peak']:.3f} |")

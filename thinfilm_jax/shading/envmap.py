@@ -203,20 +203,32 @@ def lookup_bilinear(image, omega, layer=None) -> Array:
     axes), a stack (L, h, w, ...) read at image[layer]."""
     if layer is None:
         image, layer = image[None], jnp.zeros(omega.shape[:-1], jnp.int32)
-    h, w = image.shape[1], image.shape[2]
+    return read_taps(image, layer, bilinear_taps(omega, image.shape[1], image.shape[2]))
+
+
+def bilinear_taps(omega, h: int, w: int):
+    """The four texels round ω on an h × w map and their weights, for `read_taps`:
+    (rows i0, i1, columns j0, j1, fractions fx, fy), φ wrapped, θ clamped at the poles.
+    Computed once, they serve every layer and table of that size (`prefilter`)."""
     u, v = to_equirect(omega)
     x = u * w - 0.5
     y = jnp.clip(v * h - 0.5, 0.0, h - 1.0)
     x0, y0 = jnp.floor(x), jnp.minimum(jnp.floor(y), h - 2)
-    fx, fy = x - x0, y - y0
     j0 = jnp.mod(x0.astype(jnp.int32), w)
-    j1 = jnp.mod(j0 + 1, w)
     i0 = y0.astype(jnp.int32)
-    i1 = i0 + 1
+    return i0, i0 + 1, j0, jnp.mod(j0 + 1, w), x - x0, y - y0
+
+
+def read_taps(image, layer, taps) -> Array:
+    """image[layer] (a stack (L, h, w, ...)) read bilinearly at `bilinear_taps`."""
+    i0, i1, j0, j1, fx, fy = taps
+    n_l, h, w = image.shape[:3]
+    flat = image.reshape((n_l * h * w,) + image.shape[3:])  # one index per tap
+    r0, r1 = (layer * h + i0) * w, (layer * h + i1) * w
     fx = fx.reshape(fx.shape + (1,) * (image.ndim - 3))
     fy = fy.reshape(fy.shape + (1,) * (image.ndim - 3))
-    top = image[layer, i0, j0] * (1 - fx) + image[layer, i0, j1] * fx
-    bot = image[layer, i1, j0] * (1 - fx) + image[layer, i1, j1] * fx
+    top = flat[r0 + j0] * (1 - fx) + flat[r0 + j1] * fx
+    bot = flat[r1 + j0] * (1 - fx) + flat[r1 + j1] * fx
     return top * (1 - fy) + bot * fy
 
 

@@ -49,8 +49,8 @@ import numpy as np
 from jax import Array
 
 from ..core import _validate as V
-from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance_weights,
-                     texel_centers, texel_solid_angles)
+from .envmap import (EnvMap, bilinear_taps, downsample, load_envmap, luminance_weights,
+                     read_taps, texel_centers, texel_solid_angles)
 from ..optics.fresnel import complex_dtype, safe_sqrt
 from ..realtime.improved import _bilinear, lookup_lobe
 from ..spectral.lut import ShatLUT, build_shat_lut
@@ -224,24 +224,38 @@ def _level_lerp(pref: PrefilteredEnvMap, sqrt_alpha):
     return i0.astype(jnp.int32), t - i0
 
 
-def _read_levels(pref: PrefilteredEnvMap, table, direction, sqrt_alpha):
-    """`table` (L, h, w, ...) bilinear in direction, linear in √α between levels."""
+def _read_levels(pref: PrefilteredEnvMap, tables, direction, sqrt_alpha):
+    """Each of `tables` (L, h, w, ...) bilinear in direction, linear in √α between levels.
+
+    The texels and weights in direction (`envmap.bilinear_taps`, two arctangents) are found
+    once for all tables and both levels; the two levels are the two steps of a `lax.scan`,
+    so the read is a loop whose results are buffers. Unrolled, XLA's CPU backend fuses the
+    gathers into every consumer of the read (the kernels use the moments in dozens of
+    places) and recomputes them there: `envmap_radiance(method="filtered")` took 1.9× as
+    long (figures/kernel_bench.md)."""
     i0, f = _level_lerp(pref, sqrt_alpha)
-    lo = lookup_bilinear(table, direction, i0)
-    hi = lookup_bilinear(table, direction, i0 + 1)
-    ff = f.reshape(f.shape + (1,) * (lo.ndim - f.ndim))
-    return lo * (1 - ff) + hi * ff
+    h, w = tables[0].shape[1:3]
+    taps = bilinear_taps(direction, h, w)
+    shape = jnp.broadcast_shapes(direction.shape[:-1], f.shape)
+
+    def level(acc, step):  # step 0: level i0 with weight 1 − f; step 1: i0 + 1 with f
+        wgt = jnp.where(step == 0, 1 - f, f)
+        reads = (read_taps(t, i0 + step, taps) for t in tables)
+        return tuple(a + r * wgt.reshape(wgt.shape + (1,) * (r.ndim - wgt.ndim))
+                     for a, r in zip(acc, reads)), None
+
+    acc = tuple(jnp.zeros(shape + t.shape[3:], jnp.result_type(t, f)) for t in tables)
+    return jax.lax.scan(level, acc, jnp.arange(2, dtype=jnp.int32))[0]
 
 
 def lookup_prefiltered(pref: PrefilteredEnvMap, omega_r, sqrt_alpha):
     """(P (..., 3), moments (..., 9) or (..., 3, 9)) at the reflection direction and √α."""
-    return tuple(_read_levels(pref, t, omega_r, sqrt_alpha)
-                 for t in (pref.radiance, pref.moments))
+    return _read_levels(pref, (pref.radiance, pref.moments), omega_r, sqrt_alpha)
 
 
 def lookup_radiance(pref: PrefilteredEnvMap, direction, sqrt_alpha):
     """P (..., 3) alone (no moments) at a direction and √α."""
-    return _read_levels(pref, pref.radiance, direction, sqrt_alpha)
+    return _read_levels(pref, (pref.radiance,), direction, sqrt_alpha)[0]
 
 
 def lookup_albedo(pref: PrefilteredEnvMap, cos_o, sqrt_alpha):

@@ -51,7 +51,8 @@ def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, term
     `light` (..., K) with shat="lut" and a cross-band `observer` (`uplift`, J·K bands j·k):
     returns Σ_k R_jk light_k (..., J), the band radiance under RGB light (SPEC §9), reading
     the table one light channel at a time (K reads of J bands, which XLA fuses into the
-    kernel's loop; one read of J·K bands per tap does not fuse and moves ~8× the bytes).
+    kernel's loop; one read of J·K bands per tap does not fuse and moves ~8× the bytes);
+    `lut` may then be the table already split per channel (`split_by_light`).
 
     `interpolation` is the LUT read (`lut.lookup`) when shat="lut". With ``opd.std=None``
     the path is known to be exact (σ_D = 0, the `ideal` kernel): the LUT is read at σ = 0
@@ -83,14 +84,23 @@ def _lut_bands_under_light(film, cos_mean, opd, observer, terms, lut, arithmetic
     n_light = light.shape[-1]
     s0 = shat_at_zero(observer, jnp.result_type(cos_mean, float), "exact")
     ft = fused_terms(film, cos_mean, arithmetic=arithmetic)
+    luts = lut if isinstance(lut, tuple) and not isinstance(lut, ShatLUT) else \
+        split_by_light(lut, n_light)
     out = None
     for k in range(n_light):
-        lut_k = ShatLUT(lut.table[..., k::n_light], lut.carrier[k::n_light], lut.mu_max,
-                        lut.sigma_max)
-        r = _read_orders(ft, s0[k::n_light], terms, opd, lut_k, interpolation)
+        r = _read_orders(ft, s0[k::n_light], terms, opd, luts[k], interpolation)
         r = r * light[..., k:k + 1]
         out = r if out is None else out + r
     return out
+
+
+def split_by_light(lut: ShatLUT, n_light: int = 3) -> tuple[ShatLUT, ...]:
+    """The cross-band table (bands j·k, light channel k fastest) as one J-band table per
+    light channel k, the layout `filtered_bands(light=...)` reads. Each is a strided copy of
+    the table: a kernel that reads it in a loop (the bins of `improved`) splits it once,
+    before the loop, and passes the tuple as `lut` (XLA does not hoist the copies out)."""
+    return tuple(ShatLUT(lut.table[..., k::n_light], lut.carrier[k::n_light], lut.mu_max,
+                         lut.sigma_max) for k in range(n_light))
 
 
 def _read_orders(ft, s0, terms, opd, lut, interpolation):

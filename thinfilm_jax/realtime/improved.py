@@ -266,7 +266,12 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
 
 
 def _bilinear(tab, x, y):
-    """tab[(x, y) ∈ [0, 1]², ...] read bilinearly on its uniform grid."""
+    """tab[(x, y) ∈ [0, 1]², ...] read bilinearly on its uniform grid.
+
+    The two columns in y are the two steps of a `lax.scan`, so the read is a buffer:
+    unrolled, XLA's CPU backend fused its 4 gathers into each consumer (the bins' means,
+    the lobe's directions and levels) and recomputed them there (`envmap_radiance(method=
+    "improved")` 1.1× slower, tests/realtime/test_kernel_fusion.py)."""
     def cell(v, n):
         t = jnp.clip(v, 0.0, 1.0) * (n - 1)
         i = jnp.clip(jnp.floor(t), 0, n - 2)
@@ -278,9 +283,14 @@ def _bilinear(tab, x, y):
     j0, fy = cell(y, n_y)
     extra = (1,) * (tab.ndim - 2)
     fx, fy = fx.reshape(fx.shape + extra), fy.reshape(fy.shape + extra)
-    a0 = tab[i0, j0] * (1 - fx) + tab[i0 + 1, j0] * fx
-    a1 = tab[i0, j0 + 1] * (1 - fx) + tab[i0 + 1, j0 + 1] * fx
-    return a0 * (1 - fy) + a1 * fy
+
+    def column(acc, step):  # the two y-columns as loop steps: the read is a buffer
+        j = j0 + step
+        a = tab[i0, j] * (1 - fx) + tab[i0 + 1, j] * fx
+        return acc + a * jnp.where(step == 0, 1 - fy, fy), None
+
+    acc = jnp.zeros(x.shape + tab.shape[2:], jnp.result_type(tab, fx))
+    return jax.lax.scan(column, acc, jnp.arange(2, dtype=jnp.int32))[0]
 
 
 def lookup_bins(table: BinTable, cos_o, alpha):

@@ -57,6 +57,7 @@ from .ibl_reference import (_interp, _lobe_cos_weight, _r_table,  # noqa: F401 (
                             auto_subdivisions, exact_radiance, texel_nodes)
 from ..optics.fresnel import safe_sqrt
 from ..realtime.improved import BinTable, bin_bands, bin_table, lookup_bins, scan_bins
+from ..realtime.filtered import split_by_light
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..spectral.khr import khr_bands
 from ..spectral.lut import build_shat_lut
@@ -325,13 +326,14 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     rad, shift = bin_radiance_parts(pref, table, normal, view, co, alpha)  # (K, ..., 3)
     cb, sb = lookup_bins(table, co, alpha)
     obs = cross_band_name(observer) if cross_band else observer
-
-    bands = functools.partial(bin_bands, observer=obs, terms=terms, shat=shat, lut=lut,
+    per_light = cross_band and shat == "lut"  # Σ_c R_jc P_c, the table read per light channel
+    bands = functools.partial(bin_bands, observer=obs, terms=terms, shat=shat,
+                              lut=split_by_light(lut, 3) if per_light else lut,
                               arithmetic=arithmetic)
 
     def under_light(film, c, s, read):  # the bin's film × its radiance P_k (..., 3)
         light = read + shift
-        if cross_band and shat == "lut":  # Σ_c R_jc P_c, the table read per light channel
+        if per_light:
             return bands(film, c, s, light)
         r = bands(film, c, s)
         if cross_band:

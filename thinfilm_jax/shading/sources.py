@@ -290,6 +290,63 @@ def _dot(a, b):
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]  # no contraction
 
 
+def _node_terms(d, w, normal, view, alpha, co, c_axis, dot=_dot):
+    """f, f·δ, f·δ² of cap nodes `d` (..., 3) with weights `w`: f = ρ̃ ⟨n, ω_i⟩ dω of the node
+    (GGX D·G₂/(4 cos θ_o), 0 below the horizon) and δ = ⟨ω_i, ω_o⟩ − c_axis (the shift keeps
+    the variance of a tiny cap free of cancellation). Elementwise: `d` may be one node (its
+    scalars against per-point arrays) or nodes on an axis of their own; `dot` the 3-vector
+    product."""
+    ci = dot(normal, d)
+    h = d + view
+    hn2 = dot(h, h)
+    lit = (ci > 0) & (hn2 > 0)
+    cos_h = dot(normal, h) / jnp.sqrt(jnp.where(lit, hn2, 1.0))
+    f = normal_distribution(cos_h, alpha) * _g2_over_cos_o(jnp.where(lit, ci, 0.0), co, alpha,
+                                                           "ggx") / 4
+    f = jnp.where(lit, f, 0.0) * w
+    delta = dot(view, d) - c_axis
+    fd = f * delta
+    return f, fd, fd * delta
+
+
+@jax.custom_vjp
+def _cap_sums(nodes, wts, normal, view, alpha, co, c_axis):
+    """Σ_q of `_node_terms` over one cap's nodes (Q, 3), (Q,) at every shading point.
+
+    Forward: the Q nodes unrolled on per-point arrays (one elementwise pass; a reduction over
+    a short node axis would be a loop of its own). Backward: the same terms with the nodes on
+    an axis, so that each point's cotangent reaches the nodes through one reduction; the
+    unrolled form's transpose has one reduction per node scalar, and XLA:CPU fused the whole
+    per-point backward pass into each of them (15 copies for a 5-node cap). The gradient of
+    `source_radiance` w.r.t. film, α, normal, view and sources (18 points, cross-band LUT)
+    compiles in 10.7 s instead of 16.1 (2-core CPU)."""
+    terms = [_node_terms(nodes[q], wts[q], normal, view, alpha, co, c_axis)
+             for q in range(nodes.shape[0])]
+    return tuple(functools.reduce(jnp.add, t) for t in zip(*terms))
+
+
+def _sum_dot(a, b):
+    return jnp.sum(a * b, axis=-1)  # the transpose of `_dot`'s three slices is three pads
+
+
+def _cap_sums_on_axis(nodes, wts, normal, view, alpha, co, c_axis):
+    """`_cap_sums` with the nodes on an axis (what its backward pass differentiates)."""
+    x = (normal[..., None, :], view[..., None, :], alpha[..., None], co[..., None],
+         c_axis[..., None])
+    return tuple(jnp.sum(t, axis=-1) for t in _node_terms(nodes, wts, *x, dot=_sum_dot))
+
+
+def _cap_sums_fwd(*args):
+    return _cap_sums(*args), args
+
+
+def _cap_sums_bwd(args, cts):
+    return jax.vjp(_cap_sums_on_axis, *args)[1](cts)
+
+
+_cap_sums.defvjp(_cap_sums_fwd, _cap_sums_bwd)
+
+
 def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observer: str,
                     terms: int = 2, shat: str = "lut", lut=None, arithmetic: str = "complex",
                     cross_band: bool = True, rule: tuple[int, int] = DEFAULT_CAP_RULE) -> Array:
@@ -314,30 +371,11 @@ def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observ
     cos_o = _dot(normal, view)
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
-    nx, ny, nz = (normal[..., i] for i in range(3))
-    vx, vy, vz = (view[..., i] for i in range(3))
+    alpha = jnp.asarray(alpha)
     mass, mu_c, var_c = [], [], []
-    # one elementwise pass: the S × Q nodes unrolled on per-point arrays, running sums of
-    # f, f·δ, f·δ² with δ = c − c_axis (c = ⟨ω_i, ω_o⟩; the shift keeps the variance of a
-    # tiny cap free of cancellation); a reduction over a short node axis would be a loop
     for s in range(sources.count):
-        ax, ay, az = (sources.direction[s, i].astype(normal.dtype) for i in range(3))
-        c_axis = vx * ax + vy * ay + vz * az
-        m = m1 = m2 = None
-        for q in range(nodes.shape[1]):
-            dx, dy, dz = nodes[s, q, 0], nodes[s, q, 1], nodes[s, q, 2]
-            ci = nx * dx + ny * dy + nz * dz
-            hx, hy, hz = dx + vx, dy + vy, dz + vz
-            hn2 = hx * hx + hy * hy + hz * hz
-            lit = (ci > 0) & (hn2 > 0)
-            cos_h = (nx * hx + ny * hy + nz * hz) / jnp.sqrt(jnp.where(lit, hn2, 1.0))
-            f = (normal_distribution(cos_h, alpha)
-                 * _g2_over_cos_o(jnp.where(lit, ci, 0.0), co, alpha, "ggx") / 4)
-            f = jnp.where(lit, f, 0.0) * wts[s, q]  # ρ̃ ⟨n, ω_i⟩ dω of the node
-            delta = (vx * dx + vy * dy + vz * dz) - c_axis
-            fd = f * delta
-            m, m1, m2 = ((f, fd, fd * delta) if m is None else
-                         (m + f, m1 + fd, m2 + fd * delta))
+        c_axis = _dot(view, sources.direction[s].astype(normal.dtype))
+        m, m1, m2 = _cap_sums(nodes[s], wts[s], normal, view, alpha, co, c_axis)
         has = m > 0
         inv = 1.0 / jnp.where(has, m, 1.0)
         mean_d = jnp.where(has, m1 * inv, 0.0)  # a cap with no lit node: its axis (term 0)

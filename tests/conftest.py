@@ -14,17 +14,19 @@ jax.config.update("jax_enable_x64", True)
 # JAX's persistent compilation cache, shared by every process of a test run — the two
 # pytest-xdist workers, the CLI and notebook kernels the tests start (they call
 # `enable_compilation_cache()`, which reads THINFILM_JAX_CACHE_DIR) — and kept between runs
-# in the checkout's git-ignored .test-cache/jax (emptied when a run starts with more than
-# 2 GiB in it), so the edit–test loop compiles only what changed. Hermetic all the same: nothing
-# is read from or written to the user's cache (~/.cache/thinfilm_jax), and an entry is keyed
-# by the program's HLO, the compile options and the JAX/XLA version, so a hit is the program
-# a compile would produce (programs and their numbers do not depend on the cache). Every
-# program is stored, not only those over JAX's default 1 s. THINFILM_JAX_TEST_CACHE=fresh
-# gives a folder of the run's own, removed at the end (a clean clone's cost: what .ci/run
-# measures); any other value is a folder to use. tests/core/test_compilation_cache.py runs
-# its subprocesses with folders of its own.
-_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-_cache = os.environ.get("THINFILM_JAX_TEST_CACHE") or os.path.join(_ROOT, ".test-cache", "jax")
+# and between checkouts of this machine in ~/.cache/thinfilm_jax-tests/jax ($XDG_CACHE_HOME
+# if set; emptied when a run starts with more than 2 GiB in it), so that the edit–test loop
+# and a clean clone's check (.ci/run) compile only the programs that changed. Hermetic all
+# the same: the user's own cache (~/.cache/thinfilm_jax) is neither read nor written, and an
+# entry is keyed by the program's HLO, the compile options and the JAX/XLA version, so a hit
+# is the program a compile would produce (programs and their numbers do not depend on the
+# cache). Every program is stored, not only those over JAX's default 1 s.
+# THINFILM_JAX_TEST_CACHE=fresh gives a folder of the run's own, removed at the end (a fresh
+# machine's cost); any other value is a folder to use. tests/core/test_compilation_cache.py
+# runs its subprocesses with folders of their own.
+_MACHINE_CACHE = os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"),
+                              "thinfilm_jax-tests", "jax")
+_cache = os.environ.get("THINFILM_JAX_TEST_CACHE") or _MACHINE_CACHE
 if _cache == "fresh":
     _cache = tempfile.mkdtemp(prefix="thinfilm-jax-test-cache-")
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)

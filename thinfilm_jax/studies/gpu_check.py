@@ -9,7 +9,12 @@ from the wheels that ``make gpu-wheels`` downloads beforehand) runs
 2. the GPU table: Airy reflectance over 10⁶ and 10⁷ (cos θ, λ) pairs (float32 and float64);
    a 2560 × 1440 frame of shading points under a prefiltered map for ``ideal``,
    ``filtered`` and ``improved`` (float32); reference patches (float64); a reference fit
-   cold and warm in two fresh processes sharing JAX's persistent compilation cache.
+   cold and warm in two fresh processes sharing JAX's persistent compilation cache;
+3. the kernel bench (`kernel_bench.run_kernel_bench`, float32, 2²⁰ points): every real-time
+   kernel's XLA cost per point (flops, transcendentals, bytes accessed) and warm time against
+   the elementwise peak of the same device, written beside the JSON as kernel_bench.json /
+   .md; ``--kernel-baseline PATH`` (a checkout of an older commit carried along) times the
+   old kernels in the same run.
 
 Every timing reports the first call (compile + run) apart from the warm median. The JSON is
 rewritten atomically after each section, so a run stopped by its time limit keeps what it
@@ -38,9 +43,9 @@ from pathlib import Path
 
 SIZES = {
     "full": {"airy": (10**6, 10**7), "frame": (2560, 1440), "patches": 4096,
-             "fit_quadrature": 16, "test_budget_s": 300},
+             "fit_quadrature": 16, "test_budget_s": 300, "kernel_points": 2**20},
     "small": {"airy": (10**4, 10**5), "frame": (64, 36), "patches": 64,
-              "fit_quadrature": 8, "test_budget_s": 60},
+              "fit_quadrature": 8, "test_budget_s": 60, "kernel_points": 4096},
 }
 
 _SUMMARY = re.compile(r"^=*\s*(?P<body>(\d+ \w+(, )?)+).* in (?P<t>[\d.]+)s", re.M)
@@ -211,6 +216,14 @@ def bench_fit_cache(quadrature: int) -> list[dict]:
     return rows
 
 
+def bench_kernels(points: int, out: Path, baseline=None) -> list[dict]:
+    """`kernel_bench.run_kernel_bench` on this device (5 interleaved repeats); its rows."""
+    from .kernel_bench import run_kernel_bench
+
+    result = run_kernel_bench(out, points=points, repeats=5, baseline=baseline, verbose=False)
+    return [{**r, "peak_gflops_per_s": result["peak_gflops_per_s"]} for r in result["rows"]]
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m thinfilm_jax.studies.gpu_check",
                                 description=__doc__.split("\n\n")[0])
@@ -220,6 +233,8 @@ def main(argv=None) -> int:
     p.add_argument("--skip-tests", action="store_true", help="only the bench table")
     p.add_argument("--test-budget", type=float, default=None, help="seconds for the suite")
     p.add_argument("--pytest-args", default="", help="extra pytest arguments (one string)")
+    p.add_argument("--kernel-baseline", default=None,
+                   help="folder of an older checkout whose kernels the kernel bench times too")
     args = p.parse_args(argv)
 
     import jax
@@ -235,7 +250,9 @@ def main(argv=None) -> int:
     sections = [("airy", lambda: bench_airy(size["airy"])),
                 ("frame", lambda: bench_frame(*size["frame"])),
                 ("patches", lambda: bench_patches(size["patches"])),
-                ("fit_cache", lambda: bench_fit_cache(size["fit_quadrature"]))]
+                ("fit_cache", lambda: bench_fit_cache(size["fit_quadrature"])),
+                ("kernels", lambda: bench_kernels(size["kernel_points"], out,
+                                                  args.kernel_baseline))]
     if not args.skip_tests:
         budget = args.test_budget or size["test_budget_s"]
         sections.insert(0, ("tests", lambda: run_tests(budget, args.pytest_args.split())))
@@ -268,6 +285,12 @@ def table(report: dict) -> str:
         if isinstance(r, dict) and "fit_s" in r:
             lines.append(f"| {r['path']} | float64 | 1 | {r['process_s']:.3g} | "
                          f"{r['fit_s']:.3g} | – |")
+    kernels = report["sections"].get("kernels", {}).get("result", [])
+    if isinstance(kernels, list) and kernels:
+        lines += ["", "| kernel | version | bytes / pt | ns / pt | fraction of peak |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| {r['kernel']} | {r['version']} | {r['bytes_accessed']:.0f} | "
+                  f"{r['ns_per_point']:.3g} | {r['fraction_of_peak']:.3f} |" for r in kernels]
     tests = report["sections"].get("tests", {}).get("result", {})
     if tests:
         lines.append(f"\ntests: {tests.get('counts')} in {tests.get('wall_s', 0):.0f} s "

@@ -388,16 +388,15 @@ def test_contractions_state_their_precision(method):
     else:
         assert count_contractions(fn, *args) >= 1
     assert_contractions_precise(fn, *args)
-    if method == "filtered":  # the prefilter's own contractions too (one level)
-        from thinfilm_jax.shading.prefilter import _filter_level
+    if method == "filtered":  # the prefilter's one device program: elementwise, no contraction
+        # (its sums over texels are float64 FFTs and products on the host, prefilter.filter_level)
+        from thinfilm_jax.shading.prefilter import _lobe_rows
 
-        d = jnp.asarray(texel_centers(8, 16).reshape(-1, 3), jnp.float32)
-        om = jnp.asarray(texel_solid_angles(8, 16).reshape(-1), jnp.float32)
-        for per_channel in (False, True):
-            assert_contractions_precise(
-                lambda r: _filter_level(jnp.float32(0.3), r, d, om, d.reshape(8, 16, 3),
-                                        jnp.ones(3, jnp.float32), per_channel),
-                jnp.ones((128, 3), jnp.float32))
+        rows = [jnp.linspace(0.1, 3.0, n, dtype=jnp.float32) for n in (4, 8, 16)]
+        args = (jnp.float32(0.3), jnp.cos(rows[0]), jnp.sin(rows[0]), jnp.cos(rows[1]),
+                jnp.sin(rows[1]), jnp.cos(rows[2]))
+        assert count_contractions(_lobe_rows, *args) == 0
+        assert_contractions_precise(_lobe_rows, *args)
 
 
 # ----------------------------------------------------------------------------- stiff inputs

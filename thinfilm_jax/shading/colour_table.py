@@ -39,7 +39,7 @@ is periodic in ψ: the trapezoid rule converges geometrically), view nodes
 u = √cos θ_o = 1/n, 2/n, …, 1 (n = `n_view`; the variable of `prefilter.albedo_table`), R_jk(c)
 exact spectral on `n_cos` nodes of c, interpolated. A(θ_o, α) is the exact `microfacet.albedo` at
 the material's α on 64 nodes of √cos θ_o; P(ω_r, α) is the map prefiltered at exactly α
-(`prefilter._filter_level`). Measured errors (tests/shading/test_colour_table.py): the
+(`prefilter.filter_level`). Measured errors (tests/shading/test_colour_table.py): the
 decomposition's own error (`decomposition_error`), convergence under refinement, and the
 method against the exact reference and the exact-colour ceiling (`exact_colour_radiance`,
 C_jk computed at each shading point) in the colour-table study.
@@ -84,7 +84,7 @@ from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance
                      texel_centers, texel_solid_angles)
 from .ibl_reference import _interp, _local_frame, _lobe_cos_weight, _r_table, texel_nodes
 from ..realtime.improved import bin_table
-from .prefilter import _filter_level, bin_radiance
+from .prefilter import bin_radiance, filter_level
 
 __all__ = ["ColourTable", "prefilter_colour", "colour_table_radiance", "check_colour_table",
            "exact_colour_radiance", "decomposition_error", "map_fingerprint"]
@@ -427,20 +427,14 @@ def prefilter_colour(envmap, material, alpha=None, *, observer: str = DEFAULT_OB
 
 
 def _ggx_level(env: EnvMap, alpha: float, hb: int, wb: int, dt):
-    """P(ω_r, α) (hb, wb, 3): the map prefiltered at exactly α (`prefilter._filter_level`),
+    """P(ω_r, α) (hb, wb, 3): the map prefiltered at exactly α (`prefilter.filter_level`),
     its input box-filtered while the texels stay ≤ α/4."""
     src = env
     while (src.shape[0] // 2 >= hb and src.shape[0] % 2 == 0
            and np.pi / (src.shape[0] // 2) <= alpha / 4):
         src = downsample(src, 2)
-    bh, bw = src.shape
-    p, _ = _filter_level(jnp.asarray(alpha, dt),
-                         jnp.asarray(np.asarray(src.radiance), dt).reshape(-1, 3),
-                         jnp.asarray(texel_centers(bh, bw).reshape(-1, 3), dt),
-                         jnp.asarray(texel_solid_angles(bh, bw).reshape(-1), dt),
-                         jnp.asarray(texel_centers(hb, wb), dt),
-                         jnp.asarray(luminance_weights(), dt), False)
-    return p
+    p, _ = filter_level(alpha, src.radiance, hb, wb)
+    return jnp.asarray(p, dt)
 
 
 def _paint_brightness(paint: CarPaint, env: EnvMap, hb: int, wb: int, dt, alphas):

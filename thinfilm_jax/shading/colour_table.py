@@ -80,8 +80,8 @@ from ..core.film import Film
 from ..optics.airy import choose_arithmetic
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 from ..spectral.uplift import cross_band_name
-from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, luminance_weights,
-                     texel_centers, texel_solid_angles)
+from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, texel_centers,
+                     texel_solid_angles)
 from .ibl_reference import _interp, _local_frame, _lobe_cos_weight, _r_table, texel_nodes
 from ..realtime.improved import bin_table
 from .prefilter import bin_radiance, filter_level

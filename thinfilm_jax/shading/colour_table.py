@@ -84,7 +84,7 @@ from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, texel_cen
                      texel_solid_angles)
 from .ibl_reference import _interp, _local_frame, _lobe_cos_weight, _r_table, texel_nodes
 from ..realtime.improved import bin_table
-from .prefilter import bin_radiance, filter_level
+from .prefilter import bin_radiance, filter_level, level_source
 
 __all__ = ["ColourTable", "prefilter_colour", "colour_table_radiance", "check_colour_table",
            "exact_colour_radiance", "decomposition_error", "map_fingerprint"]
@@ -280,10 +280,7 @@ def _ratio(num, den, num1, den1, cross):
 
 def _source_map(env: EnvMap, alpha: float, subdivisions: int | None):
     """Box-filter the map while its texels stay ≤ α/4 (as `prefilter`); nodes per texel."""
-    src = env
-    while (src.shape[0] // 2 >= 16 and src.shape[0] % 2 == 0
-           and np.pi / (src.shape[0] // 2) <= alpha / 4):
-        src = downsample(src, 2)
+    src = level_source(env, alpha, 16)
     h, w = src.shape
     s = subdivisions or int(np.clip(np.ceil(2 * np.pi / h / alpha), 1, 4))
     return src, h, w, s
@@ -429,11 +426,7 @@ def prefilter_colour(envmap, material, alpha=None, *, observer: str = DEFAULT_OB
 def _ggx_level(env: EnvMap, alpha: float, hb: int, wb: int, dt):
     """P(ω_r, α) (hb, wb, 3): the map prefiltered at exactly α (`prefilter.filter_level`),
     its input box-filtered while the texels stay ≤ α/4."""
-    src = env
-    while (src.shape[0] // 2 >= hb and src.shape[0] % 2 == 0
-           and np.pi / (src.shape[0] // 2) <= alpha / 4):
-        src = downsample(src, 2)
-    p, _ = filter_level(alpha, src.radiance, hb, wb)
+    p, _ = filter_level(alpha, level_source(env, alpha, hb).radiance, hb, wb)
     return jnp.asarray(p, dt)
 
 

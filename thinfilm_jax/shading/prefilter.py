@@ -117,11 +117,23 @@ def _lobe_rows(alpha, cos_r, sin_r, cos_i, sin_i, cos_dphi):
     return jnp.where(ok, k, 0.0)
 
 
+def level_source(env: EnvMap, alpha: float, min_rows: int) -> EnvMap:
+    """The coarsest box-filtered map (`envmap.downsample` by 2, repeatedly) whose texels stay
+    no wider than a quarter of the lobe (π/H ≤ α/4) and whose rows stay ≥ `min_rows`: the
+    input of a level (also of `colour_table`'s filtered maps)."""
+    src = env
+    while (src.shape[0] // 2 >= min_rows and src.shape[0] % 2 == 0
+           and np.pi / (src.shape[0] // 2) <= alpha / 4):
+        src = downsample(src, 2)
+    return src
+
+
 def filter_level(alpha: float, radiance, h: int, w: int, per_channel: bool = False,
                  row_block: int = 16):
     """One level of the prefilter: P (h, w, 3) and the moments (h, w, 9) or (h, w, 3, 9)
     (NaN where the lobe sees no light) of an equirect map `radiance` (H, W, 3), W a multiple
-    of w, at the output texel centres, in float64 on the host.
+    of w, at the output texel centres, float64 NumPy arrays (the kernel evaluated by
+    `_lobe_rows` in JAX's default float, the sums in float64 on the host).
 
     The weights w_t = k_α(ω_r, ω_t) Ω_t of an output direction depend on its column only
     through the azimuth offset φ_t − φ_r, so each output row is a circular correlation
@@ -213,10 +225,7 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
             moms.append(m)
             continue
         alpha = s * s
-        src = env  # coarsest input whose texels stay narrower than α/4, not below the output
-        while (src.shape[0] // 2 >= h and src.shape[0] % 2 == 0
-               and np.pi / (src.shape[0] // 2) <= alpha / 4):
-            src = downsample(src, 2)
+        src = level_source(env, alpha, h)  # not below the output's rows
         p, m = (jnp.asarray(x, dtype) for x in filter_level(alpha, src.radiance, h, w,
                                                              per_channel))
         lobe = _features(out_dirs)  # only used where the neighbourhood is black

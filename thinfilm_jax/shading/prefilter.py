@@ -195,8 +195,8 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
             (`sources.source_radiance`). 0 (default): the map as it is (the published
             `filtered` method).
     Cost: Σ_levels h·N_l kernel evaluations and h FFT correlations over N_l texels (N_l input
-    texels of level l, `filter_level`), once: 3.5 s for a 512 × 1024 map (float64, 2-core
-    CPU; 44 s when every output texel summed every input texel).
+    texels of level l, `filter_level`), once: 2.8–3.3 s for a 512 × 1024 map (float64, 2-core
+    CPU; 44–45 s when every output texel summed every input texel; figures/prefilter_bench.md).
     """
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
     found = None

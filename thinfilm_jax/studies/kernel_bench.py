@@ -7,7 +7,13 @@ sun split from the map, `sources`), float32, `points` shading points:
 
 * XLA's cost analysis of the compiled program (`jax.jit(f).lower(...).compile()
   .cost_analysis()`): flops, transcendentals and bytes accessed, per point. Deterministic
-  for a given jax/XLA version: the lead figures.
+  for a given jax/XLA version: the lead figures. Beside them, the floor and the cause: the
+  bytes of the per-point arguments and results (what one fused loop would move) and the
+  number of XLA kernels (fusions) in the compiled program, each of which writes an
+  intermediate array that later kernels read back. On XLA:CPU the kernels split where an
+  expensive value (a sqrt or a divide) has users in more than one fusion: the instruction
+  fusion pass does not duplicate it ("too expensive to duplicate", its VLOG), so the value
+  goes through memory.
 * the warm time per point: calls interleaved over every program (old and new), the minimum
   of `repeats` kept (the machine is shared; the minimum is the least disturbed run), compile
   time apart (the explicit lower + compile of the cost analysis, or first call − warm);
@@ -23,12 +29,15 @@ Run: ``python -m thinfilm_jax.studies.kernel_bench [--out figures] [--quick]
 [--baseline /path/to/old/checkout] [--repeats N]``.
 
 Example (the cost of one fused loop: y = 2x + 1 reads 4 B and writes 4 B of float32 and
-does two flops per point, no transcendental):
+does two flops per point, no transcendental, in one kernel that moves only its inputs and
+outputs):
     >>> import jax, jax.numpy as jnp
     >>> c = cost_per_point(jax.jit(lambda x: x * 2.0 + 1.0), (jnp.ones(1024, jnp.float32),),
     ...                    1024)
-    >>> c["flops"], c["transcendentals"], c["bytes_accessed"], c["loops"]
-    (2.0, 0.0, 8.0, [])
+    >>> c["flops"], c["transcendentals"], c["bytes_accessed"], c["io_bytes"], c["fusions"]
+    (2.0, 0.0, 8.0, 8.0, 1)
+    >>> c["loops"]
+    []
 """
 
 from __future__ import annotations
@@ -153,15 +162,23 @@ def cost_per_point(fn, args, n: int) -> dict:
     """XLA's cost analysis of the compiled `fn(*args)`, divided by the point count, and the
     known trip counts of its while loops (`loops`, in program order). XLA counts a loop's
     body once (HloCostAnalysis::HandleWhile): where `loops` is not empty the figures are
-    one step of each loop plus what the loops carry, not the whole run."""
+    one step of each loop plus what the loops carry, not the whole run. `io_bytes`: the
+    per-point arguments and results (leading axis `n`; the tables, shared by all points,
+    left out) per point, the traffic of one fused loop; `fusions`: the XLA
+    kernels of the compiled program (loop bodies counted once)."""
     compiled = fn.lower(*args).compile()
     ca = compiled.cost_analysis()
     ca = ca[0] if isinstance(ca, list) else ca
+    text = compiled.as_text()
     loops = [int(t) for t in re.findall(r' while\(.*?"known_trip_count":\{"n":"(\d+)"\}',
-                                        compiled.as_text())]
+                                        text)]
+    io = sum(np.dtype(x.dtype).itemsize * x.size  # per-point arrays; tables are shared
+             for x in jax.tree.leaves((args, jax.eval_shape(fn, *args)))
+             if x.ndim and x.shape[0] == n)
     return {"flops": ca.get("flops", 0.0) / n, "transcendentals":
             ca.get("transcendentals", 0.0) / n, "bytes_accessed": ca.get("bytes accessed",
                                                                           0.0) / n,
+            "io_bytes": io / n, "fusions": text.count(" fusion("),
             "loops": loops}
 
 
@@ -265,20 +282,26 @@ def report_markdown(result: dict) -> str:
              f"jax {env['jax']}, {env['date']}. Cost: XLA cost analysis of the compiled "
              "program (deterministic); XLA counts a while loop's body once, so where the "
              "loops column lists trip counts (the table reads as loop steps) flops and bytes "
-             "are one step of each loop plus what the loops carry. Time: minimum of "
+             "are one step of each loop plus what the loops carry; in + out: the arguments and "
+             "results per point, tables left out (what one fused loop would move); XLA "
+             "kernels: fusions in "
+             "the compiled program, each writing an intermediate array. Time: minimum of "
              f"{result['repeats']} interleaved warm calls (median in brackets; a shared, "
              f"noisy machine). Elementwise peak in the same run: "
              f"{result['peak_gflops_per_s']:.1f} GFLOP/s ({result['peak_loop']}).", ""]
     if result["baseline"]:
         lines += [f"old: {result['baseline']['path']} (commit {result['baseline']['commit']});"
                   f" new: commit {result['current_commit']}.", ""]
-    lines += ["| kernel | version | flops / pt | transcendentals / pt | bytes / pt | loops "
-              "| ns / pt | compile s | GFLOP/s | fraction of peak |",
-              "|---|---|---:|---:|---:|---|---:|---:|---:|---:|"]
+    lines += ["| kernel | version | flops / pt | transcendentals / pt | bytes / pt "
+              "| in + out B / pt | XLA kernels | loops | ns / pt | compile s | GFLOP/s "
+              "| fraction of peak |",
+              "|---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|"]
     for r in sorted(result["rows"], key=lambda r: (KERNELS.index(r["kernel"]), r["version"])):
         loops = " ".join(str(t) for t in r.get("loops", [])) or "–"
         lines.append(f"| {r['kernel']} | {r['version']} | {r['flops']:.0f} "
-                     f"| {r['transcendentals']:.1f} | {r['bytes_accessed']:.0f} | {loops} "
+                     f"| {r['transcendentals']:.1f} | {r['bytes_accessed']:.0f} "
+                     f"| {r.get('io_bytes', float('nan')):.0f} | {r.get('fusions', '–')} "
+                     f"| {loops} "
                      f"| {r['ns_per_point']:.0f} ({r['ns_per_point_median']:.0f}) "
                      f"| {r['compile_s']:.1f} | {r['gflops_per_s']:.2f} "
                      f"| {r['fraction_of_peak']:.3f} |")

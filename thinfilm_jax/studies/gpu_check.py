@@ -287,9 +287,10 @@ def table(report: dict) -> str:
                          f"{r['fit_s']:.3g} | – |")
     kernels = report["sections"].get("kernels", {}).get("result", [])
     if isinstance(kernels, list) and kernels:
-        lines += ["", "| kernel | version | bytes / pt | ns / pt | fraction of peak |",
-                  "|---|---|---|---|---|"]
+        lines += ["", "| kernel | version | bytes / pt | in + out B / pt | XLA kernels | ns / pt "
+                  "| fraction of peak |", "|---|---|---|---|---|---|---|"]
         lines += [f"| {r['kernel']} | {r['version']} | {r['bytes_accessed']:.0f} | "
+                  f"{r.get('io_bytes', float('nan')):.0f} | {r.get('fusions', '–')} | "
                   f"{r['ns_per_point']:.3g} | {r['fraction_of_peak']:.3f} |" for r in kernels]
     tests = report["sections"].get("tests", {}).get("result", {})
     if tests:

@@ -1,5 +1,5 @@
 """Timing and bookkeeping shared by the studies: warm/compile timing, chunked evaluation,
-the machine description, JSON conversion.
+the machine description, JSON conversion and the report files (`write_report`).
 
 Times: the first call's time minus the warm time is reported as compile time; the warm time
 is the median of `repeats` (≥ 1) calls, each ended by `jax.block_until_ready`.
@@ -13,7 +13,8 @@ import platform
 import statistics
 import sys
 import time
-from typing import NamedTuple
+from pathlib import Path
+from typing import Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -136,3 +137,16 @@ def jsonable(x):
     if isinstance(x, np.ndarray):
         return jsonable(x.tolist())
     return x
+
+
+def write_report(out, stem: str, result: dict, markdown: Callable[[dict], str]) -> str:
+    """Write a study's `result` as ``out/<stem>.json`` (`jsonable`) and its `markdown`
+    rendering as ``out/<stem>.md``, each atomically (`out` created); returns the markdown."""
+    from ..core._io import atomic_write, write_json
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / f"{stem}.json", jsonable(result))
+    text = markdown(result)
+    atomic_write(out / f"{stem}.md", lambda tmp: Path(tmp).write_text(text))
+    return text

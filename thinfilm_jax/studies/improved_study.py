@@ -56,7 +56,7 @@ from ..brdf.microfacet import albedo, splitsum_light_moments
 from ..realtime.options import ModelOptions
 from ..shading.patch import patch_radiance
 from ._common import MATERIALS, material_film, view_vector
-from ._timing import environment, jsonable
+from ._timing import environment, jsonable, write_report
 from .pareto import render_kernel_pareto
 
 WIDE_THETA_DEG = (0.0, 30.0, 50.0, 65.0, 75.0, 82.0, 88.0)
@@ -595,9 +595,7 @@ def run(cfg: StudyConfig = StudyConfig(), out="figures", verbose=True) -> dict:
     if cfg.ibl:
         result["ibl"] = ibl_renders(verbose, held_out=cfg.held_out)
     result["kernels"] = kernel_rows(cfg, ref, verbose)
-    write_json(out / "improved.json", jsonable(result))
-    text = markdown(result)
-    atomic_write(out / "improved.md", lambda tmp: Path(tmp).write_text(text))
+    text = write_report(out, "improved", result, markdown)
     render_kernel_pareto(result["kernels"], out / "improved_pareto.png",
                 "Real-time kernels, uniform light: error on the wide grid (4 materials × d ≤ "
                 "1000 nm × θ_o ≤ 88° × α ∈ [0.01, 0.9]) against float32 cost per shading "

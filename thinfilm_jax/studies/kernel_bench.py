@@ -55,8 +55,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core._io import atomic_write, write_json
-from ._timing import environment, jsonable, log
+from ._timing import environment, log, write_report
 
 F32 = jnp.float32
 PEAK_VALUES = 2**20
@@ -97,6 +96,11 @@ def _commit(path) -> str | None:
                               capture_output=True, text=True, timeout=10).stdout.strip() or None
     except (OSError, subprocess.SubprocessError):
         return None
+
+
+def baseline_record(baseline) -> dict | None:
+    """The "baseline" entry of a before/after report: the checkout's path and commit."""
+    return None if baseline is None else {"path": str(baseline), "commit": _commit(baseline)}
 
 
 def shading_points(n: int, seed: int = 0):
@@ -256,18 +260,14 @@ def run_kernel_bench(out="figures", *, points: int = 65536, repeats: int = 7,
                 speedup[name] = {"time": o["ns_per_point"] / n["ns_per_point"],
                                  "bytes": o["bytes_accessed"] / n["bytes_accessed"]}
     result = {"environment": env, "points": points, "repeats": repeats,
-              "baseline": None if baseline is None else {"path": str(baseline),
-                                                         "commit": _commit(baseline)},
+              "baseline": baseline_record(baseline),
               "current_commit": _commit(Path(current.__file__).parent.parent),
               "peak_gflops_per_s": peak / 1e9,
               "peak_loop": f"{PEAK_DEPTH} fused float32 multiply-adds over {PEAK_VALUES} "
                            "values, minimum of the same interleaved repeats",
               "rows": [{k: v for k, v in r.items() if k != "times_s"} for r in rows],
               "speedup_old_over_new": speedup}
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "kernel_bench.json", jsonable(result))
-    text = report_markdown(result)
-    atomic_write(out / "kernel_bench.md", lambda tmp: Path(tmp).write_text(text))
+    text = write_report(out, "kernel_bench", result, report_markdown)
     if verbose:
         print(text)
     return result

@@ -24,7 +24,6 @@ from __future__ import annotations
 import sys
 import time
 import warnings
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -33,8 +32,7 @@ import numpy as np
 from ..optics.airy import airy_reflectance
 from ..core.film import Film
 from ._common import MATERIALS, BenchConfig
-from ..core._io import atomic_write, write_json
-from ._timing import environment, jsonable, log, time_call, time_host
+from ._timing import environment, log, time_call, time_host, write_report
 
 
 def numpy_airy(eta_outer, eta_film, n_base, thickness, cos_theta, wavelength, *,
@@ -273,11 +271,7 @@ def write_peers(peers, out, *, environment_=None, config=None, command=None) -> 
     machine, the run's settings and the targets); returns what was written."""
     result = {"command": command, "environment": environment_ or environment(),
               "config": config, **peers, "targets": peers_targets(peers)}
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "peers.json", jsonable(result))
-    text = peers_markdown(result)
-    atomic_write(out / "peers.md", lambda tmp: Path(tmp).write_text(text))
+    write_report(out, "peers", result, peers_markdown)
     return result
 
 

@@ -30,11 +30,10 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from ..core._io import atomic_write, write_json
 from ..shading.envmap import SHIPPED, load_envmap
 from ..shading.prefilter import prefilter_envmap
-from ._timing import environment, jsonable, log
-from .kernel_bench import _commit, load_package
+from ._timing import environment, log, write_report
+from .kernel_bench import _commit, baseline_record, load_package
 
 DTYPES = (np.float64, np.float32)
 
@@ -81,14 +80,9 @@ def run_prefilter_bench(out="figures", *, baseline=None, maps=(), verbose=True) 
         rows.append(row)
         log(f"  {row}", verbose)
     result = {"environment": environment(), "current_commit": _commit(Path(__file__).parents[2]),
-              "baseline": None if baseline is None else {"path": str(baseline),
-                                                         "commit": _commit(baseline)},
+              "baseline": baseline_record(baseline),
               "rows": rows}
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "prefilter_bench.json", jsonable(result))
-    text = report_markdown(result)
-    atomic_write(out / "prefilter_bench.md", lambda tmp: Path(tmp).write_text(text))
+    text = write_report(out, "prefilter_bench", result, report_markdown)
     if verbose:
         print(text)
     return result

@@ -35,7 +35,6 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -167,8 +166,7 @@ def _diff_eps(a: np.ndarray, ref: np.ndarray) -> float:
 
 def run_scaling(cfg: ScalingConfig = ScalingConfig(), out_dir="figures") -> dict:
     """Run the workloads on every device count; write scaling.json and scaling.md."""
-    from ..core._io import atomic_write, write_json
-    from ._timing import jsonable
+    from ._timing import write_report
 
     if any(k < 1 for k in cfg.devices):
         raise ValueError(f"devices must be positive ints, got {cfg.devices}")
@@ -196,10 +194,7 @@ def run_scaling(cfg: ScalingConfig = ScalingConfig(), out_dir="figures") -> dict
     summary = {"config": dataclasses.asdict(cfg), "baseline_devices": base,
                "environment": {k: runs[k]["environment"] for k in cfg.devices},
                "table": table}
-    out = Path(out_dir)
-    write_json(out / "scaling.json", jsonable(summary))
-    md = format_table(summary)
-    atomic_write(out / "scaling.md", lambda p: Path(p).write_text(md))
+    write_report(out_dir, "scaling", summary, format_table)
     return summary
 
 

@@ -32,20 +32,18 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core._io import atomic_write, write_json
 from ..core.film import Film
 from ..realtime.kernels import filtered_kernel, ideal_kernel, lobe_moments
 from ..spectral.lut import build_shat_lut
 from ..spectral.reflectance import bare_bands, rgb_reflectance
 from ..spectral.spectra import Observer, get_observer
 from ._common import MATERIALS, SB, BenchConfig, error_stats, view_vector
-from ._timing import environment, fmt, jsonable, log, time_call
+from ._timing import environment, fmt, log, time_call, write_report
 
 THETA_DEG = np.linspace(0.0, 85.0, 32)
 ALPHAS = (0.01, 0.05, 0.1, 0.25, 0.4)
@@ -186,10 +184,7 @@ def run_specialisation(cfg: BenchConfig, out=None, verbose: bool = True) -> dict
     result = {"environment": environment(), "points": n, "repeats": cfg.repeats,
               "dtype": "float32", "reference_points": k, "rows": rows}
     if out is not None:
-        out = Path(out)
-        write_json(out / "specialisation.json", jsonable(result))
-        text = specialisation_markdown(result)
-        atomic_write(out / "specialisation.md", lambda tmp: Path(tmp).write_text(text))
+        write_report(out, "specialisation", result, specialisation_markdown)
     if verbose:
         print(specialisation_markdown(result))
     return result

@@ -33,8 +33,8 @@ bench: $(STAMP)
 # gpu-wheels` here downloads them for its Python 3.12 into .whl/ (ignored by git, ≈ 18 MB),
 # `make gpu-check` there installs them and runs the suite, the GPU table and the kernel bench
 # into $$OUT (or figures/); GPU_CHECK_ARGS=--kernel-baseline DIR times an older checkout's
-# kernels too (e.g. `git worktree add .base 6b7cf29`, carried). CPU dry run: `make gpu-check PY=.venv/bin/python JAX_PLATFORMS=cpu
-# GPU_CHECK_ARGS=--small`.
+# kernels too (e.g. `git worktree add .base 6b7cf29`, carried). CPU dry run: `make gpu-check
+# PY=.venv/bin/python JAX_PLATFORMS=cpu GPU_CHECK_ARGS=--small`.
 GPU_WHEELS := colour-science==0.4.7 openimageio==3.2.2.0 tmm==0.2.0
 GPU_CHECK_ARGS ?=
 gpu-wheels:

@@ -141,6 +141,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=_bench)
 
     from ..shading.envmap import SHIPPED
+    from ..studies.render import METHODS as RENDER_METHODS
 
     rd = sub.add_parser("render", help="spheres under environment maps (Kneiphof Figs. 3-6)",
                         description="Render spheres under environment maps with the chosen "
@@ -156,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "carpaint: the example car paints, exact reference vs Kneiphof & "
                          "Klein 2022's colour table (repeatable; default: fig4, fig3, varying)")
     rd.add_argument("--method", action="append",
-                    choices=["reference", "mc", "ideal", "filtered", "improved", "khr"],
+                    choices=RENDER_METHODS,
                     help="methods, in columns (repeatable; default reference, ideal, "
                          "filtered, improved)")
     rd.add_argument("--alphas", type=float, nargs="+", help="α of the fig3 sweep "

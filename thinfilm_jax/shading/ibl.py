@@ -49,6 +49,7 @@ import numpy as np
 from jax import Array
 
 from ..core import _validate as V
+from ..core.methods import names as method_names
 from ..optics.airy import choose_arithmetic
 from .colour_table import ColourTable, check_colour_table, colour_table_radiance
 from .envmap import EnvMap, load_envmap
@@ -68,7 +69,7 @@ from .sources import source_radiance
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from ..spectral.uplift import cross_band_name
 
-METHODS = ("reference", "mc", "ideal", "filtered", "improved", "khr", "colour_table")
+METHODS = method_names("envmap")  # the registry's order (core/methods.py)
 REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST
 DEFAULT_SOURCES = 4  # suns split from a map that `improved` prefilters itself

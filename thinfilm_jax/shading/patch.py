@@ -43,6 +43,7 @@ import numpy as np
 from jax import Array
 
 from ..core import _validate as V
+from ..core.methods import names as method_names
 from ..optics.airy import choose_arithmetic
 from ..core.film import Film
 from ..realtime.filtered import filtered_bands
@@ -57,8 +58,7 @@ from ..spectral.khr import khr_bands
 from ..spectral.reflectance import bare_bands, choose_layer, spectral_bands
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 
-METHODS = ("reference", "ideal", "filtered_gt_moments", "filtered_gt_opd", "filtered",
-           "improved", "khr")
+METHODS = method_names("patch")  # the registry's order (core/methods.py)
 
 
 def _check_patch_args(film, theta_o, alpha, method, observer, options):

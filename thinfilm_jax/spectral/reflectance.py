@@ -24,6 +24,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from ..core import _validate as V
+from ..core.methods import names as method_names
 from ..optics.airy import broadcast_all, choose_arithmetic, polarised_reflectance
 from ..core.film import Film
 from ..optics.fresnel import film_interfaces
@@ -31,7 +32,7 @@ from ..optics.series import fourier_band_reflectance, series_terms
 from .khr import _khr_jit
 from .spectra import DEFAULT_OBSERVER, SHAT_METHODS, get_observer, sensitivity_ft, shat_at_zero
 
-METHODS = ("spectral", "fourier", "khr")
+METHODS = method_names("rgb")  # the registry's order (core/methods.py)
 LAYERS = ("auto", "film", "bare")
 
 

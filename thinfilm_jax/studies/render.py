@@ -59,6 +59,7 @@ from ..spectral.khr import rec709_to_bands
 from ..spectral.spectra import DEFAULT_OBSERVER
 from ..shading.envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..core.film import Film
+from ..core.methods import names as method_names
 from ..shading.ibl import DEFAULT_SOURCES, REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
 from ..shading.ibl_reference import resample_factor
 from ..shading.prefilter import prefilter_envmap
@@ -71,7 +72,9 @@ from .colour_table_study import PAINT_TABLE
 SCENES = ("fig4", "fig3", "varying")  # the default scenes (films)
 ALL_SCENES = SCENES + ("carpaint",)
 PAINT_METHODS = ("reference", "colour_table")  # the columns of the car-paint scene
-METHODS = ("reference", "mc", "ideal", "filtered", "improved", "khr")  # every `ibl.METHODS` entry
+# every `envmap_radiance` method of the registry (core/methods.py) that shades a film varying
+# per pixel; "colour_table" tabulates one homogeneous material (the car-paint scene's column)
+METHODS = tuple(m for m in method_names("envmap") if m != "colour_table")
 DEFAULT_METHODS = ("reference", "ideal", "filtered", "improved")
 
 

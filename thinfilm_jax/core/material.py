@@ -1,0 +1,79 @@
+"""What the exact paths take: a `Film` (constant or dispersive indices) or a `Stack` (SPEC §12).
+
+A film whose indices are all numbers runs the one-film Airy code (`optics.airy`), the fast
+path it always had. A film with an index model in any index field, or a `Stack`, runs the
+layer-stack code (`optics.stack`), which evaluates every index at each wavelength; `as_stack`
+gives the one-layer stack of a dispersive film, identical to 1e-12 (SPEC §12).
+
+Batching. The per-point quantities of a material are its thicknesses: a `Film`'s fields all
+broadcast with the shading points (as before), a `Stack`'s ``thickness`` (..., N) carries
+leading batch axes while its indices are shared by every point (vmap over several stacks).
+`point_split` flattens the per-point part for `jax.lax.map` and rebuilds one point's material,
+with no positional unpacking of fields.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .film import Film
+from .stack import Stack
+
+INDEX_FIELDS = ("eta_film", "eta_base", "eta_outer")
+
+
+def _is_model(x) -> bool:
+    return callable(x) and not isinstance(x, (np.ndarray, jax.Array))
+
+
+def is_dispersive(x) -> bool:
+    """True for a `Film` with an index model in an index field, or a `Stack` with any index
+    model; False for constant indices."""
+    if isinstance(x, Stack):
+        return any(_is_model(e) for e in (*x.eta, x.eta_base, x.eta_outer))
+    if isinstance(x, Film):
+        return any(_is_model(getattr(x, k)) for k in INDEX_FIELDS)
+    return False
+
+
+def needs_stack(x) -> bool:
+    """True when `x` must run the stack code: a `Stack`, or a dispersive `Film`."""
+    return isinstance(x, Stack) or is_dispersive(x)
+
+
+def as_stack(x) -> Stack:
+    """`x` as a `Stack` (a `Film` becomes its one-layer stack)."""
+    if isinstance(x, Stack):
+        return x
+    if isinstance(x, Film):
+        if _is_model(x.eta_base) and np.any(np.asarray(x.kappa_base) != 0):
+            raise ValueError("film.kappa_base must be 0 when film.eta_base is an index model "
+                             "(the model carries κ)")
+        return Stack.from_film(x)
+    raise TypeError(f"expected a thinfilm_jax.Film or Stack, got {type(x).__name__}")
+
+
+def batch_shape(stack: Stack) -> tuple[int, ...]:
+    """The per-point (batch) shape of a stack: the leading axes of its thickness."""
+    return tuple(np.shape(stack.thickness)[:-1])
+
+
+def point_split(stack: Stack, shape: tuple[int, ...]) -> tuple[Any, Callable[[Any], Stack]]:
+    """(the per-point part flattened to (prod(shape), ...), one point's stack from a slice).
+
+    The thicknesses are broadcast to `shape` + (N,) and flattened; the indices are closed
+    over (shared by every point)."""
+    n = stack.n_layers
+    t = jnp.broadcast_to(jnp.asarray(stack.thickness), (*shape, n)).reshape(-1, n)
+    return t, lambda ti: stack._replace(thickness=ti)
+
+
+def expand_batch(stack: Stack) -> Stack:
+    """The stack with a unit batch axis appended (its thickness (..., 1, N)), so that it
+    broadcasts against an extra trailing axis of angles."""
+    return stack._replace(thickness=jnp.asarray(stack.thickness)[..., None, :])

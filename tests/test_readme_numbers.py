@@ -400,7 +400,7 @@ def _fig7_rows():
 
 
 def _fig7_costs():
-    f = artifact("figure7.json")
+    f = artifact("figure7_timing.json")  # written by `make bench`, not by `make figure7`
     n = f["config"]["resolution"] ** 2
     sec = f["seconds_per_method"]
     return [f["config"]["resolution"], None, 2 * n, f["compute_seconds"],
@@ -712,11 +712,11 @@ SPECS = [
              r"compile = cold − warm run; prefiltering the map took (\S+) s",
              ("fit_map_demo.json", "fit_map_demo_envmap.json"), _fit_map_machine),
     Sentence(r"all eight (\d+) × \d+ panels \((\d) × (\S+) patches\) in \*\*(\S+) s\*\* including "
-             r"compilation, at a load average of (\S+) \(`figures/figure7.json`\)\. Cost per "
+             r"compilation, at a load average of (\S+) \(`figures/figure7_timing.json`\)\. Cost per "
              r"patch of row \(e\)–\(h\) \(the method's time over its (\S+) patches, its "
              r"compilation "
              r"included\): `ideal` (\S+) µs, `filtered_gt_moments` (\S+) µs, `filtered_gt_opd` "
-             r"(\S+) µs, `reference` (\S+) ms", ("figure7.json",), _fig7_costs),
+             r"(\S+) µs, `reference` (\S+) ms", ("figure7_timing.json",), _fig7_costs),
     Sentence(r"Measured on the (\d+)-core CPU of this project's machines \(no GPU was available\), "
              r"at a load average of (\S+) from other jobs at the start of the run",
              ("bench.json",), _bench_load),

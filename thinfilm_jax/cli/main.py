@@ -19,9 +19,11 @@ def _figure7(args) -> int:
     fields = {f.name for f in dataclasses.fields(Figure7Config)}
     cfg = Figure7Config(**{k: tuple(v) if isinstance(v, list) else v
                            for k, v in vars(args).items() if k in fields and v is not None})
-    summary = run_figure7(cfg, out_dir=args.out, progress=not args.quiet, devices=devices)
+    summary = run_figure7(cfg, out_dir=args.out, progress=not args.quiet, devices=devices,
+                          timing_path=args.timing)
     print(f"wrote {args.out}/figure7.png, figure7_error.png, figure7.json, figure7.npz "
-          f"in {summary['compute_seconds']:.1f} s")
+          f"in {summary['timing']['compute_seconds']:.1f} s"
+          + (f" (timing: {args.timing})" if args.timing else ""))
     print(f"{'row/method':40s} {'ΔE mean':>8s} {'ΔE p95':>8s} {'ΔE max':>8s}")
     for k, v in summary["errors_vs_reference"].items():
         print(f"{k:40s} {v['dE2000_mean']:8.3f} {v['dE2000_p95']:8.3f} {v['dE2000_max']:8.3f}")
@@ -118,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="filtered Ŝ source of K 29 (exact)")
     f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")
     f7.add_argument("--quiet", action="store_true", help="no progress bar")
+    f7.add_argument("--timing", metavar="PATH", help="also write the run's times, device and "
+                    "load average to PATH as JSON (`make bench`: figures/figure7_timing.json); "
+                    "--out holds the results only, the same on every run")
     _add_device_options(f7)
     f7.set_defaults(func=_figure7)
 

@@ -48,6 +48,8 @@ METHOD_TITLES = {
     "reference": "reference (spectral)",
 }
 ROWS = ("roughness", "thickness")
+#: no "Software" text chunk (matplotlib's version): the PNGs depend on the pixels only
+_PNG_METADATA = {"Software": None}
 
 
 @dataclass(frozen=True)
@@ -195,7 +197,8 @@ def render_figure7(data: dict, cfg: Figure7Config, path) -> None:
                 ax.set_ylabel(_ylabel(row))
     fig.suptitle("Kneiphof et al. 2019, Figure 7 — patch under uniform light\n" + _caption(cfg),
                  fontsize=11)
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png",
+                                                   metadata=_PNG_METADATA))
     plt.close(fig)
 
 
@@ -225,14 +228,21 @@ def render_error(data: dict, cfg: Figure7Config, path) -> None:
     fig.colorbar(im, ax=axes, shrink=0.8, label="CIEDE2000 ΔE vs reference")
     fig.suptitle("Error of each method against the spectral reference\n" + _caption(cfg),
                  fontsize=11)
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png",
+                                                   metadata=_PNG_METADATA))
     plt.close(fig)
 
 
 def run_figure7(cfg: Figure7Config = Figure7Config(), out_dir="figures",
-                progress: bool = True, devices=None) -> dict:
+                progress: bool = True, devices=None, timing_path=None) -> dict:
     """Compute, render and save figure7.png, figure7_error.png, figure7.json, figure7.npz.
 
+    The four files hold the science only (the configuration, x64 and the errors against the
+    reference; the band values; the panels), so a rerun on this machine rewrites them byte for
+    byte (tests/test_main_job_clean.py). How long the run took depends on the machine and its
+    load: it is returned under "timing" (the device, the load average at the start, the
+    compute seconds and the seconds per row and method, first compilation included) and
+    written to `timing_path` when given (`make bench` writes figures/figure7_timing.json).
     `devices` as in `compute_figure7`; with several processes (`jax.distributed`) every
     process computes its share and process 0 writes the files.
     """
@@ -243,19 +253,24 @@ def run_figure7(cfg: Figure7Config = Figure7Config(), out_dir="figures",
     t0 = time.perf_counter()
     data = compute_figure7(cfg, progress=progress, devices=devices)
     elapsed = time.perf_counter() - t0
+    x64 = bool(jnp.zeros(()).dtype == jnp.float64)
     summary = {
         "config": dataclasses.asdict(cfg),
+        "x64": x64,
+        "errors_vs_reference": error_summary(data, cfg),
+    }
+    timing = {
+        "config": summary["config"],
+        "x64": x64,
         "device": str(jax.devices()[0]),
         "devices": batch_mesh(devices).size,
         "processes": jax.process_count(),
-        "x64": bool(jnp.zeros(()).dtype == jnp.float64),
         "compute_seconds": elapsed,
         "load_average": load,  # at the start: the times depend on what else ran
         "seconds_per_method": data["seconds"],  # per row and method, first compilation included
-        "errors_vs_reference": error_summary(data, cfg),
     }
     if jax.process_index() > 0:
-        return summary
+        return {**summary, "timing": timing}
     arrays = {f"{r}__{m}": v for r in ROWS for m, v in data["values"][r].items()}
     theta, sqrt_alpha, thickness = grids(cfg)
     atomic_write(out / "figure7.npz", lambda tmp: np.savez_compressed(
@@ -263,4 +278,6 @@ def run_figure7(cfg: Figure7Config = Figure7Config(), out_dir="figures",
     render_figure7(data, cfg, out / "figure7.png")
     render_error(data, cfg, out / "figure7_error.png")
     write_json(out / "figure7.json", summary)
-    return summary
+    if timing_path is not None:
+        write_json(Path(timing_path), timing)
+    return {**summary, "timing": timing}

@@ -70,7 +70,7 @@ def _render(args) -> int:
     if args.alphas and not all(0 < a <= 1 for a in args.alphas):
         raise ValueError(f"--alphas must lie in (0, 1], got {args.alphas}")
     cfg = RenderConfig(resolution=args.resolution, exposure=args.exposure,
-                       observer=args.observer, **kw)
+                       observer=args.observer, ldr_srgb=args.ldr_srgb, **kw)
     summary = run_render(cfg, out_dir=args.out, progress=not args.quiet, devices=devices)
     print(f"wrote {args.out}/ibl_{{{','.join(cfg.scenes)}}}.png, ibl_render.json, ibl_render.npz")
     print(summary_table(summary))
@@ -156,6 +156,10 @@ def build_parser() -> argparse.ArgumentParser:
     rd.add_argument("--envmap", action="append", metavar="PATH_OR_NAME",
                     help=f"a .hdr/.exr file or a shipped map {sorted(SHIPPED)} (repeatable; "
                          "default: the four shipped maps)")
+    rd.add_argument("--ldr-srgb", dest="ldr_srgb", action="store_true",
+                    help="read 8-/16-bit map files (PNG, JPEG) as sRGB, decoded to relative "
+                         "radiance (white = 1); without it they are refused: display values "
+                         "are not radiance")
     rd.add_argument("--scene", action="append", choices=["fig4", "fig3", "varying", "carpaint"],
                     help="fig4: α=0.25, d=600 nm, η₂=1.2, η₃=2.0; fig3: roughness sweep, "
                          "η₂=1.3, η₃=2.0+0.5i, d=650 nm; varying: thickness texture; "

@@ -6,9 +6,16 @@ row i covers θ ∈ [iπ/H, (i+1)π/H] from +z (row 0 is the top), column j cove
 piecewise constant; texel (i, j) has solid angle Ω_i = (cos(iπ/H) − cos((i+1)π/H))·2π/W.
 
 Files are read with OpenImageIO (Radiance .hdr, OpenEXR .exr and anything else it reads);
-no parser is written here. Four CC0 Poly Haven maps ship with the package (`SHIPPED`),
-downsampled by `downsample` (solid-angle-weighted box filter, which preserves the integral
-∫ L dω of every channel exactly).
+no parser is written here. An integer image file (8-bit PNG or JPEG, 16-bit PNG or TIFF) is
+refused: its code values are display-encoded (sRGB, clipped at the display's white), not
+radiance; read as radiance, its mid-tones would be too bright (code 0.5 is radiance 0.21) and
+its sun no brighter than white. `load_envmap(path, ldr_srgb=True)` reads one knowingly, each
+code value normalised to V ∈ [0, 1] and decoded with the sRGB EOTF of IEC 61966-2-1
+(colour-science's ``cctf_decoding(V, "sRGB")``): L = V/12.92 for V ≤ 0.04045,
+((V + 0.055)/1.055)^2.4 above, relative radiance with the display's white at 1. Four CC0
+Poly Haven maps ship with the package (`SHIPPED`), downsampled by `downsample`
+(solid-angle-weighted box filter, which preserves the integral ∫ L dω of every channel
+exactly).
 
 Example (the texels tile the sphere, 4π sr; `downsample` keeps ∫ L dω of every channel):
     >>> import numpy as np
@@ -80,12 +87,17 @@ def _check_array(a, what: str) -> np.ndarray:
     return a
 
 
-def load_envmap(source, *, dtype=None) -> EnvMap:
+def load_envmap(source, *, dtype=None, ldr_srgb: bool = False) -> EnvMap:
     """An `EnvMap` from a file path (.hdr, .exr: OpenImageIO), a shipped name (`SHIPPED`),
     or an (H, W, 3) array of linear RGB laid out as in SPEC §9.
 
-    Raises ValueError naming the file and the problem for a missing or unreadable file,
-    a wrong shape, a non-equirectangular aspect ratio, or non-finite or negative texels.
+    `ldr_srgb`: read an integer (8- or 16-bit, LDR) image file as sRGB-encoded, decoded to
+    relative linear radiance by the sRGB EOTF (module docstring); without it such a file is
+    refused. Float files (.hdr, .exr, float TIFF) and arrays are read as they are either way.
+
+    Raises ValueError naming the file and the problem for a missing or unreadable file, an
+    integer (LDR) image without `ldr_srgb=True`, a wrong shape, a non-equirectangular aspect
+    ratio, or non-finite or negative texels.
     """
     if isinstance(source, EnvMap):
         source = source.radiance
@@ -96,7 +108,7 @@ def load_envmap(source, *, dtype=None) -> EnvMap:
         what = f"environment map {str(path)!r}"
         if not path.is_file():
             _fail(what, "no such file")
-        arr = _read_image(path, what)
+        arr = _read_image(path, what, ldr_srgb=ldr_srgb)
     else:
         what = "environment map array"
         arr = source
@@ -105,19 +117,39 @@ def load_envmap(source, *, dtype=None) -> EnvMap:
     return EnvMap(jnp.asarray(arr, dtype))
 
 
-def _read_image(path: Path, what: str) -> np.ndarray:
+def _is_integer_format(spec) -> bool:
+    """Whether OpenImageIO stores the file's pixels as integers (8-bit PNG, JPEG, 16-bit PNG,
+    integer TIFF): display-encoded LDR, not radiance."""
+    return np.issubdtype(np.dtype(str(spec.format)), np.integer)
+
+
+def _read_image(path: Path, what: str, *, ldr_srgb: bool = False) -> np.ndarray:
+    """The file's first three channels as float64 radiance. An integer (LDR) file is decoded
+    with the sRGB EOTF when `ldr_srgb`, refused otherwise."""
     import OpenImageIO as oiio
 
     buf = oiio.ImageBuf(str(path))
     if buf.has_error:
         _fail(what, f"unreadable ({buf.geterror().strip() or 'unknown format'})")
+    integer = _is_integer_format(buf.spec())
+    if integer and not ldr_srgb:
+        _fail(what, f"an LDR image ({buf.spec().format} pixels): its values are "
+                    "display-encoded (sRGB, clipped at white), not radiance. Pass an HDR file "
+                    "(.hdr, .exr) or, to use this one knowingly, ldr_srgb=True (CLI: "
+                    "--ldr-srgb) to decode it with the sRGB EOTF into relative radiance "
+                    "(white = 1)")
     px = buf.get_pixels(oiio.FLOAT)
     if buf.has_error or px is None:
         _fail(what, f"unreadable ({buf.geterror().strip()})")
     px = np.asarray(px, np.float64)
     if px.ndim != 3 or px.shape[-1] < 3:
         _fail(what, f"expected an RGB image, got {px.shape[-1] if px.ndim == 3 else 1} channel(s)")
-    return px[..., :3]
+    px = px[..., :3]
+    if integer and ldr_srgb:
+        import colour  # the sRGB EOTF, IEC 61966-2-1 (module docstring)
+
+        px = np.asarray(colour.cctf_decoding(px, function="sRGB"), np.float64)
+    return px
 
 
 def save_envmap(path, envmap) -> Path:

@@ -88,6 +88,7 @@ class RenderConfig:
     exposure: float | None = None
     observer: str = "stiles_burch_1959_10"
     elevation_deg: float = 15.0
+    ldr_srgb: bool = False  # 8-/16-bit map files: sRGB-decoded, not refused (load_envmap)
 
     def __post_init__(self):
         bad = [m for m in self.methods if m not in METHODS]
@@ -414,7 +415,9 @@ def run_render(cfg: RenderConfig = RenderConfig(), out_dir="figures", progress: 
 
     out = Path(out_dir)
     setups = scene_setups(cfg)
-    cache: dict = {}
+    # every map read (and checked) before the first frame; `method_map` finds them here
+    cache: dict = {name: {"env": load_envmap(name, ldr_srgb=cfg.ldr_srgb)}
+                   for name in dict.fromkeys(s[2] for s in setups)}
     results = []
     for s in tqdm(setups, desc="render", disable=not progress or jax.process_index() > 0):
         results.append(render_one(s, cfg, cache, devices))

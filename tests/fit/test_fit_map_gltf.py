@@ -80,7 +80,8 @@ def test_gltf_texture_reproduces_fitted_map(wedge_files, tmp_path, capsys, bits)
     np.testing.assert_allclose(np.asarray(film.thickness), back, rtol=0, atol=1e-9)
     summary = json.loads((out / "fit_map.json").read_text())
     assert summary["gltf"]["bits"] == bits
-    assert summary["gltf"]["files"] == ["fit_map.gltf", "fit_map_thickness.png"]
+    assert summary["gltf"]["files"] == ["fit_map.gltf", "fit_map.bin", "fit_map_thickness.png"]
+    assert doc["materials"][0]["pbrMetallicRoughness"]["roughnessFactor"] == ALPHA**0.5
     assert "fit_map.gltf" in capsys.readouterr().out
     assert not [p for p in gdir.iterdir() if p.name.startswith(".")]  # no temporary left
 

@@ -14,9 +14,11 @@ pixels per second warm and the compilation time separately (the warm-up batch's 
 minus its warm cost); with ``--free thickness
 eta_film`` also ``eta_film_map.npy``).
 
-``--gltf DIR`` also writes the map as a glTF 2.0 material (`thinfilm_jax.interop.gltf.write_gltf`,
-SPEC §10): ``DIR/fit_map.gltf`` with `KHR_materials_iridescence` (η₂ as `iridescenceIor`,
-minimum and maximum covering the map, factor 1) and `KHR_materials_ior` (η₃), and the
+``--gltf DIR`` also writes the map as a complete glTF 2.0 asset, a sphere carrying the film
+(`thinfilm_jax.interop.gltf.write_gltf`, SPEC §10): ``DIR/fit_map.gltf`` with its mesh in
+``DIR/fit_map.bin`` and a material with `KHR_materials_iridescence` (η₂ as `iridescenceIor`,
+minimum and maximum covering the map, factor 1), `KHR_materials_ior` (η₃) and
+`roughnessFactor` √α, and the
 `iridescenceThicknessTexture` ``DIR/fit_map_thickness.png`` (G channel, linear, 8-bit or
 ``--gltf-bits 16``; it gives back the map to (max − min)/(2(2ᵇ − 1)) nm). What glTF cannot
 hold is a usage error before the fit: κ₃ > 0 (glTF's metals are a Schlick tint, its
@@ -90,8 +92,8 @@ def add_parser(sub) -> None:
     p.add_argument("--devices", type=int, metavar="K",
                    help="split each batch across the first K devices (default: one device)")
     p.add_argument("--gltf", metavar="DIR",
-                   help="also write DIR/fit_map.gltf and its thickness texture "
-                        "DIR/fit_map_thickness.png (glTF KHR_materials_iridescence)")
+                   help="also write a glTF asset: DIR/fit_map.gltf, fit_map.bin and the "
+                        "thickness texture fit_map_thickness.png (KHR_materials_iridescence)")
     p.add_argument("--gltf-bits", dest="gltf_bits", type=int, choices=[8, 16], default=8,
                    help="bits of the glTF thickness texture (8)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -242,9 +244,10 @@ def run_fit_map_cli(args) -> int:
         gdir.mkdir(parents=True, exist_ok=True)
         doc = write_gltf(gdir / "fit_map.gltf", Film(d, args.eta_film, args.eta_base,
                                                      args.kappa_base, args.eta_outer),
-                         bits=args.gltf_bits)
+                         alpha=args.alpha, bits=args.gltf_bits)
         ext = doc["materials"][0]["extensions"][EXTENSION]
-        gltf = {"folder": str(gdir), "files": ["fit_map.gltf", doc["images"][0]["uri"]],
+        gltf = {"folder": str(gdir), "files": ["fit_map.gltf", doc["buffers"][0]["uri"],
+                                               doc["images"][0]["uri"]],
                 "bits": args.gltf_bits,
                 "thickness_minimum_nm": ext["iridescenceThicknessMinimum"],
                 "thickness_maximum_nm": ext["iridescenceThicknessMaximum"]}
@@ -279,7 +282,7 @@ def run_fit_map_cli(args) -> int:
           f"RMS/σ median {np.median(rms):.2f}; {res.pixels_per_second:.0f} pixels/s warm, "
           f"compile {compile_s:.1f} s")
     if gltf is not None:
-        print(f"wrote {gltf['folder']}/{gltf['files'][0]}, {gltf['files'][1]}: "
+        print(f"wrote {gltf['folder']}/{', '.join(gltf['files'])}: "
               f"iridescenceThicknessMinimum {gltf['thickness_minimum_nm']:.2f} nm, "
               f"…Maximum {gltf['thickness_maximum_nm']:.2f} nm, {args.gltf_bits}-bit")
     return 0

@@ -2,7 +2,11 @@
 
 * The site (mkdocs.yml, docs/) builds with MkDocs Material and mkdocstrings in strict mode:
   a broken link, a missing figure (figures/ is served by docs/_hooks/figures.py), a docstring
-  that griffe cannot parse or an unresolved cross-reference fails the build.
+  that griffe cannot parse or an unresolved cross-reference fails the build. Strict mode lets
+  some link problems through as INFO (an unrecognized relative link such as the ``[f](θ_o, α)``
+  of a docstring's ``L[f](θ_o, α)``, a missing anchor, an absolute link): the build log must
+  have none of them (`LINK_PROBLEMS`), and every relative href/src of the built HTML must name
+  a file of the site (`broken_links`).
 * Every public name of `thinfilm_jax` (the names `thinfilm_jax/__init__.py` imports) is a
   `:::` target of docs/api/*.md, directly or as a member of a documented module, and has its
   anchor in the built API pages.
@@ -137,6 +141,41 @@ def public_names() -> dict[str, set[str]]:
     return {n: candidate_paths(n, p) for n, p in exports().items()}
 
 
+#: mkdocs 1.6's messages about a link it could not resolve, WARNING or INFO
+#: (mkdocs/structure/pages.py; INFO passes `--strict`)
+LINK_PROBLEMS = re.compile(r"contains an unrecognized relative link|is not found among "
+                           r"documentation files|there is no such anchor|contains an absolute "
+                           r"link|excluded from the built site|contains a link")
+_HREF = re.compile(r"""\b(?:href|src)\s*=\s*(?:"([^"]*)"|'([^']*)')""")
+
+
+def link_problems(log: str) -> list[str]:
+    """The lines of a `mkdocs build` log (run without -q) that report an unresolved link."""
+    return [ln.strip() for ln in log.splitlines() if LINK_PROBLEMS.search(ln)]
+
+
+def broken_links(site: Path) -> list[str]:
+    """Every relative href or src of the built HTML pages that names no file of `site`
+    ("page.html: target"); a folder link needs its index.html. Links with a scheme (http:,
+    mailto:, data:) and same-page anchors are not files and are skipped."""
+    from urllib.parse import unquote, urlsplit
+
+    out = []
+    for page in sorted(site.rglob("*.html")):
+        for m in _HREF.finditer(page.read_text("utf-8", errors="replace")):
+            url = m.group(1) if m.group(1) is not None else m.group(2)
+            parts = urlsplit(url)
+            if parts.scheme or parts.netloc or not parts.path:
+                continue
+            path = unquote(parts.path)
+            target = (site / path.lstrip("/")) if path.startswith("/") else page.parent / path
+            if path.endswith("/") or target.is_dir():
+                target = target / "index.html"
+            if not target.resolve().is_file():
+                out.append(f"{page.relative_to(site)}: {url}")
+    return out
+
+
 # ------------------------------------------------------------------------------ the tests
 
 def test_every_public_name_is_a_target_of_the_api_pages():
@@ -189,15 +228,42 @@ def test_every_page_is_in_the_nav():
     assert in_nav - pages == set(), f"nav entries without a page: {in_nav - pages}"
 
 
+def test_the_link_checks_find_unresolved_links(tmp_path):
+    """The checks themselves: the INFO line strict mode let through for ``L[f](θ_o, α)``, and
+    a built page whose relative links name a missing file; good links pass."""
+    log = ("INFO    -  Building documentation to directory: /tmp/site\n"
+           "INFO    -  Doc file 'api/brdf.md' contains an unrecognized relative link 'θ_o, α', "
+           "it was left as is.\n"
+           "INFO    -  Documentation built in 8.19 seconds\n")
+    assert link_problems(log) == ["INFO    -  Doc file 'api/brdf.md' contains an unrecognized "
+                                  "relative link 'θ_o, α', it was left as is."]
+    (tmp_path / "api" / "brdf").mkdir(parents=True)
+    (tmp_path / "figures").mkdir()
+    (tmp_path / "figures" / "a.png").write_bytes(b"")
+    (tmp_path / "index.html").write_text("<a href='api/brdf/'>ok</a>", "utf-8")
+    (tmp_path / "api" / "brdf" / "index.html").write_text(
+        '<a href="../../">up</a> <img src="../../figures/a.png"> <a href="#x">anchor</a> '
+        '<a href="https://example.org/x">web</a> <a href="mailto:a@b">mail</a> '
+        '<a href="θ_o, α">L[f]</a> <img src="../../figures/b.png"> '
+        '<a href="../../api/missing/#sec">gone</a>', "utf-8")
+    assert broken_links(tmp_path) == ["api/brdf/index.html: θ_o, α",
+                                      "api/brdf/index.html: ../../figures/b.png",
+                                      "api/brdf/index.html: ../../api/missing/#sec"]
+
+
 @needs_mkdocs
 def test_site_builds_strict_and_documents_every_public_name(tmp_path):
     site = tmp_path / "site"
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1",
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q",
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict",
                            "-f", str(ROOT / "mkdocs.yml"), "-d", str(site)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, f"mkdocs build --strict failed:\n{proc.stdout}\n{proc.stderr}"
+    unresolved = link_problems(proc.stdout + proc.stderr)
+    assert not unresolved, "links mkdocs left unresolved:\n" + "\n".join(unresolved)
+    broken = broken_links(site)
+    assert not broken, "hrefs of the built site to missing files:\n" + "\n".join(broken)
     html = "\n".join(p.read_text("utf-8") for p in (site / "api").rglob("*.html"))
     anchors = set(re.findall(r'\bid="(thinfilm_jax[\w.]*)"', html))
     missing = [f"{n} ({' or '.join(sorted(ps))})" for n, ps in sorted(public_names().items())

@@ -295,7 +295,7 @@ def brdf_no_fresnel(wi, wo, alpha, ndf="ggx"):
 # ----------------------------------------------------------------------------- patch quadrature
 def patch_quadrature(theta_o, alpha, *, quadrature=DEFAULT_QUADRATURE,
                      ndf="ggx") -> PatchQuadrature:
-    """Deterministic quadrature of L[f](θ_o, α) for one scalar (θ_o, α); N = n_phi · n_u nodes.
+    """Deterministic quadrature of `L[f](θ_o, α)` for scalar θ_o and α; N = n_phi · n_u nodes.
 
     `quadrature` = (n_u, n_phi), the inner and azimuth orders (static).
 

@@ -15,6 +15,7 @@ Mapping (SPEC §1 notation):
 | `KHR_materials_ior.ior` (1.5), `metallicFactor` = 0 | η₃, κ₃ = 0                             |
 | outside medium (air)                   | η₁ = 1                                              |
 | `iridescenceFactor` (0) × texture R     | the returned factor (`iridescence_mix`)             |
+| `roughnessFactor` r (1)                | GGX α = r² (glTF 2.0 specification, Appendix B)     |
 
 What glTF cannot hold is a `ValueError`, never dropped: κ₃ > 0 and η₁ ≠ 1 on export; on
 import a metallic base (`metallicFactor` > 0 — also when `pbrMetallicRoughness` is omitted,
@@ -30,6 +31,14 @@ Thickness maps travel as an `iridescenceThicknessTexture` PNG written with OpenI
 maximum covering the map so that no code is wasted; 8-bit by default, 16-bit on request).
 Read back (`read_thickness_texture`) the map is reproduced to the PNG quantisation,
 |Δd| ≤ (max − min)/(2(2ᵇ − 1)) (tests/interop/test_interop.py).
+
+`write_gltf` writes a complete asset a viewer opens (glTF 2.0 specification §3–§4): a UV
+sphere (`uv_sphere`; POSITION with the min/max the specification requires, NORMAL, TEXCOORD_0
+where there is a texture, indices), one node, one scene (``scene: 0``) and the material, as
+`.gltf` + `.bin` (+ the PNG) or, for a `.glb` path, one binary container (a JSON and a BIN
+chunk, 4-byte aligned, the PNG in a bufferView). The Khronos glTF-Validator reports no error,
+warning or unused object on it (tests/interop/test_gltf_asset.py). `read_gltf` and
+`load_gltf` read both forms.
 
 Example (the round trip is exact; JSON keeps every float64):
     >>> import json

@@ -340,6 +340,11 @@ def test_out_of_range_names_the_range_never_extrapolates():
         jax.block_until_ready(jax.jit(checked(lambda w: au(w)))(200.0))
 
 
+def test_composite_of_disjoint_ranges_is_an_error():
+    with pytest.raises(ValueError, match="do not overlap"):
+        CompositeIndex(refractive_index("Si"), TabulatedIndex([1500.0, 1600.0], [0, 0], [0, 1]))
+
+
 def test_negative_kappa_is_an_error():
     with pytest.raises(ValueError, match="≥ 0"):
         refractive_index(1.5 - 0.1j)

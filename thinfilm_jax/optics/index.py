@@ -454,8 +454,9 @@ class CompositeIndex(IndexModel):
         lo = max(n_model.wavelength_range[0], k_model.wavelength_range[0])
         hi = min(n_model.wavelength_range[1], k_model.wavelength_range[1])
         if not lo < hi:
-            raise ValueError(f"CompositeIndex {name}: the n data ({_range_text(n_model.wavelength_range)}) "
-                             f"and the k data ({_range_text(k_model.wavelength_range)}) do not overlap")
+            raise ValueError(f"CompositeIndex {name}: the n data "
+                             f"({_range_text(n_model.wavelength_range)}) and the k data "
+                             f"({_range_text(k_model.wavelength_range)}) do not overlap")
         self.n_model, self.k_model = n_model, k_model
         self.name = name or f"{n_model.name} + {k_model.name}"
         self.citation = citation or "; ".join(

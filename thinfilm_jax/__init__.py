@@ -5,13 +5,14 @@ Kneiphof et al. 2019 filtered reflectance for rough surfaces, and a uniform-ligh
 integrator. Conventions (docs/SPEC.md): nm, radians, GGX α, colour bands of unit area.
 
 The public face is this file; the package is grouped in layers, each importing only those
-before it: `core` (the `Film` pytree, input checks, file output, compilation cache,
-sharding) → `optics` (interface amplitudes, exact Airy R, BB17 series terms, the D
-distribution) → `spectral` (observers and Ŝ, band reflectances, the Ŝ(μ,σ²) table, the RGB
-basis of maps, colorimetry, glTF's iridescence) → `brdf` (normal distributions, masking,
-diffuse terms, `Material`, patch quadrature) → `realtime` (K 29, the improved model,
-per-point kernels) → `shading` (uniform-light patch, environment maps, prefiltering, suns,
-the exact and real-time IBL) → `fit` (optimistix fits, thickness maps) → `interop` (glTF,
+before it: `core` (the `Film` and `Stack` pytrees, the method registry, input checks, file
+output, compilation cache, sharding) → `optics` (interface amplitudes, exact Airy R, layer
+stacks, index models and bundled materials, BB17 series terms, the D distribution) →
+`spectral` (observers and Ŝ, band reflectances, the Ŝ(μ,σ²) table, the RGB basis of maps,
+colorimetry, glTF's iridescence) → `brdf` (normal distributions, masking, diffuse terms,
+`Material`, patch quadrature) → `realtime` (K 29, the improved model, per-point kernels) →
+`shading` (uniform-light patch, environment maps, prefiltering, suns, the exact and
+real-time IBL) → `fit` (optimistix fits, thickness maps) → `interop` (glTF,
 OpenPBR) → `studies` (Figure 7, benchmarks, stability; nothing below imports it) → `cli`.
 
 Example (SPEC §4: the Fourier path K 4 converges to the exact spectral bands, which share its
@@ -39,6 +40,19 @@ from .shading.envmap import SHIPPED as SHIPPED_ENVMAPS
 from .shading.envmap import EnvMap as EnvMap
 from .shading.envmap import load_envmap as load_envmap
 from .core.film import Film as Film
+from .core.stack import Stack as Stack
+from .core.methods import METHODS as METHODS
+from .optics.stack import stack_reflectance as stack_reflectance
+from .optics.stack import stack_transmittance as stack_transmittance
+from .optics.materials import MATERIALS as MATERIALS
+from .optics.materials import refractive_index as refractive_index
+from .optics.index import IndexModel as IndexModel
+from .optics.index import ConstantIndex as ConstantIndex
+from .optics.index import TabulatedIndex as TabulatedIndex
+from .optics.index import FormulaIndex as FormulaIndex
+from .optics.index import CompositeIndex as CompositeIndex
+from .optics.index import cauchy as cauchy
+from .optics.index import sellmeier as sellmeier
 from .fit.film_fit import FitOptions as FitOptions
 from .fit.film_fit import FitResult as FitResult
 from .fit.film_fit import fit_film as fit_film

@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .film import Film
+from .stack import Stack
 
 #: Values at most this many ulps (of the bound's magnitude, at least of 1) outside a closed
 #: range are taken as rounding: cos θ = cos(π/2) in float32 is −4.4e-8 (0.4 ulp of 1).
@@ -204,12 +205,81 @@ def check_broadcast(names_values: Iterable[tuple[str, object]]) -> tuple[int, ..
         raise ValueError(f"arguments have incompatible shapes: {desc}") from None
 
 
+def _is_model(x) -> bool:
+    """An index model (SPEC §12): a callable pytree, not a number or an array."""
+    return callable(x) and not isinstance(x, (np.ndarray, jax.Array))
+
+
+def check_index(name: str, eta, wavelengths=None):
+    """A constant index (real or complex n + iκ: finite, n > 0, κ ≥ 0) or an index model;
+    a model must cover the concrete `wavelengths` (nm), else a ValueError names its range."""
+    if _is_model(eta):
+        if wavelengths is not None:
+            lo, hi = getattr(eta, "wavelength_range", (0.0, np.inf))
+            w = np.asarray(wavelengths, float)
+            if w.size and (w.min() < lo or w.max() > hi):
+                label = getattr(eta, "name", "") or type(eta).__name__
+                raise ValueError(f"{name} ({label}) is defined on {lo:g}–{hi:g} nm; it is "
+                                 f"needed on {w.min():g}–{w.max():g} nm (no extrapolation)")
+        return eta
+    eta = as_array(name, eta)
+    if is_concrete(eta):
+        v = np.asarray(eta)
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"{name} must be finite; got NaN or inf in {name}")
+        if np.any(np.real(v) <= 0) or np.any(np.imag(v) < 0):
+            raise ValueError(f"{name} must be n + iκ with n > 0 and κ >= 0; got {v!r}")
+    return eta
+
+
+def check_stack(stack, name: str = "stack", wavelengths=None) -> Stack:
+    """Validate a `Stack` (SPEC §12): thicknesses finite and >= 0 with N = len(eta) on their
+    last axis, every index `check_index` (models covering `wavelengths`)."""
+    if not isinstance(stack, Stack):
+        raise TypeError(f"{name} must be a thinfilm_jax.Stack, got {type(stack).__name__}")
+    if not isinstance(stack.eta, (tuple, list)) or not stack.eta:
+        raise ValueError(f"{name}.eta must be a non-empty sequence of N layer indices")
+    d = check_range(f"{name}.thickness", as_array(f"{name}.thickness", stack.thickness), 0.0,
+                    why=" (nm, d >= 0)")
+    if np.shape(d)[-1:] != (len(stack.eta),):
+        raise ValueError(f"{name}.thickness must hold the {len(stack.eta)} layer thicknesses on "
+                         f"its last axis (one per eta); got shape {np.shape(d)}")
+    eta = tuple(check_index(f"{name}.eta[{i}]", e, wavelengths) for i, e in enumerate(stack.eta))
+    return Stack(d, eta, check_index(f"{name}.eta_base", stack.eta_base, wavelengths),
+                 check_index(f"{name}.eta_outer", stack.eta_outer, wavelengths))
+
+
+def check_material(x, name: str = "film", wavelengths=None):
+    """A `Film` with constant indices (`check_film`) or what runs the stack code: a `Stack`,
+    or a `Film` with index models (returned as its one-layer `Stack`, SPEC §12)."""
+    if isinstance(x, Film) and any(_is_model(getattr(x, k))
+                                   for k in ("eta_film", "eta_base", "eta_outer")):
+        if _is_model(x.eta_base) and (not is_concrete(x.kappa_base)
+                                      or np.any(np.asarray(x.kappa_base) != 0)):
+            raise ValueError(f"{name}.kappa_base must be 0 when {name}.eta_base is an index "
+                             f"model (the model carries κ)")
+        for k in ("eta_film", "eta_base", "eta_outer"):
+            v = getattr(x, k)
+            if not _is_model(v) and np.ndim(v) != 0:
+                raise ValueError(f"{name}.{k} must be a scalar when another index is a model "
+                                 f"(only thickness varies per point; vmap over materials)")
+        return check_stack(Stack.from_film(x._replace(
+            eta_base=x.eta_base if _is_model(x.eta_base) else x.eta_base + 1j * x.kappa_base,
+            kappa_base=0.0)), name, wavelengths)
+    if isinstance(x, Stack):
+        return check_stack(x, name, wavelengths)
+    return check_film(x, name)
+
+
 def check_film(film, name: str = "film") -> Film:
     """Validate a `Film` (SPEC §1 domain) and return it normalised: list fields as arrays
     and a complex `eta_base` η + iκ folded into (eta_base = η, kappa_base = kappa_base + κ)
     (`Film.real_base`). Callers must use the returned film."""
     if not isinstance(film, Film):
         raise TypeError(f"{name} must be a thinfilm_jax.Film, got {type(film).__name__}")
+    if any(_is_model(getattr(film, k)) for k in ("eta_film", "eta_base", "eta_outer")):
+        raise ValueError(f"{name} has a dispersive index (an index model): this path takes "
+                         f"constant indices only (SPEC §12: the exact methods take it)")
     film = Film(*(as_array(f"{name}.{k}", v) for k, v in film._asdict().items())).real_base()
     film = Film(
         check_range(f"{name}.thickness", film.thickness, 0.0, why=" (nm, d >= 0)"),

@@ -58,22 +58,37 @@ def as_stack(x) -> Stack:
     raise TypeError(f"expected a thinfilm_jax.Film or Stack, got {type(x).__name__}")
 
 
-def batch_shape(stack: Stack) -> tuple[int, ...]:
-    """The per-point (batch) shape of a stack: the leading axes of its thickness."""
-    return tuple(np.shape(stack.thickness)[:-1])
+def batch_shape(x) -> tuple[int, ...]:
+    """The per-point (batch) shape of a material: a `Film`'s broadcast field shape, the
+    leading axes of a `Stack`'s thickness."""
+    if isinstance(x, Stack):
+        return tuple(np.shape(x.thickness)[:-1])
+    return tuple(x.shape)
 
 
-def point_split(stack: Stack, shape: tuple[int, ...]) -> tuple[Any, Callable[[Any], Stack]]:
-    """(the per-point part flattened to (prod(shape), ...), one point's stack from a slice).
+def point_split(x, shape: tuple[int, ...]) -> tuple[Any, Callable[[Any], Any]]:
+    """(the per-point part of material `x` flattened to (prod(shape), ...), the function that
+    makes one point's material (or a block of points') from a slice of it).
 
-    The thicknesses are broadcast to `shape` + (N,) and flattened; the indices are closed
-    over (shared by every point)."""
-    n = stack.n_layers
-    t = jnp.broadcast_to(jnp.asarray(stack.thickness), (*shape, n)).reshape(-1, n)
-    return t, lambda ti: stack._replace(thickness=ti)
+    A `Film`: every field broadcast to `shape` and flattened (a `Film` of vectors). A `Stack`:
+    its thicknesses broadcast to `shape` + (N,) and flattened; the indices are shared by every
+    point and closed over. Use inside `jit` (the pieces are traced arrays)."""
+    if isinstance(x, Stack):
+        n = x.n_layers
+        t = jnp.broadcast_to(jnp.asarray(x.thickness), (*shape, n)).reshape(-1, n)
+        return t, lambda ti: x._replace(thickness=ti)
+    flat = jax.tree.map(lambda v: jnp.broadcast_to(jnp.asarray(v), shape).reshape(-1), x)
+    return flat, lambda f: f
 
 
-def expand_batch(stack: Stack) -> Stack:
-    """The stack with a unit batch axis appended (its thickness (..., 1, N)), so that it
-    broadcasts against an extra trailing axis of angles."""
-    return stack._replace(thickness=jnp.asarray(stack.thickness)[..., None, :])
+def first_point(part):
+    """The first point of a `point_split` part (what every point shares when they are one)."""
+    return jax.tree.map(lambda v: v[0], part)
+
+
+def expand_batch(x):
+    """Material `x` with a unit batch axis appended, so that it broadcasts against an extra
+    trailing axis of angles: a `Film`'s fields (..., 1), a `Stack`'s thickness (..., 1, N)."""
+    if isinstance(x, Stack):
+        return x._replace(thickness=jnp.asarray(x.thickness)[..., None, :])
+    return jax.tree.map(lambda v: jnp.asarray(v)[..., None], x)

@@ -77,9 +77,16 @@ def sqrt_upper(z: Array) -> Array:
 
 
 def complex_dtype(*xs):
-    """The complex dtype matching the real precision of `xs` (float32 → complex64, …)."""
-    return jax.dtypes.canonicalize_dtype(np.result_type(jnp.result_type(*xs, float),
-                                                        np.complex64))
+    """The complex dtype matching the real precision of `xs` (float32 → complex64, …); real
+    and complex inputs may be mixed (each is read alone: no dtype promotion between them,
+    which strict promotion forbids)."""
+    bits = 0
+    for x in xs:
+        dt = jnp.result_type(x)
+        dt = jnp.finfo(dt).dtype if jnp.issubdtype(dt, jnp.inexact) else jnp.result_type(float)
+        bits = max(bits, np.dtype(dt).itemsize)
+    real = jax.dtypes.canonicalize_dtype(np.float64 if bits > 4 else np.float32)
+    return np.result_type(real, np.complex64)
 
 
 def as_complex(x: Array) -> Array:

@@ -49,7 +49,12 @@ import numpy as np
 from jax import Array
 
 from ..core import _validate as V
+from ..core.material import batch_shape, expand_batch, is_dispersive, needs_stack
+from ..core.methods import METHODS as METHOD_INFO
 from ..core.methods import names as method_names
+from ..core.methods import require
+from ..core.stack import Stack
+from ..spectral.reflectance import band_centroids, band_film
 from ..optics.airy import choose_arithmetic
 from .colour_table import ColourTable, check_colour_table, colour_table_radiance
 from .envmap import EnvMap, load_envmap
@@ -116,7 +121,17 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
             published method). A `PrefilteredEnvMap` carries its own split (it was made
             by `prefilter_envmap(sources=...)`) and every real-time method shades it.
     Shading points with ⟨n, ω_o⟩ ≤ 0 give 0.
+
+    A `Stack`, or a `Film` with index models (SPEC §12), runs the stack code in the exact
+    methods (its thicknesses may vary per point, its indices are shared); the real-time ones
+    take a dispersive single film at each band's centroid (`spectral.reflectance.band_film`);
+    `core.methods.require` names what any other method lacks.
     """
+    if needs_stack(film):
+        return _material_envmap(film, alpha, normal, view, envmap, method, observer, dict(
+            options=options, cross_band=cross_band, subdivisions=subdivisions, n_cos=n_cos,
+            n_samples=n_samples, key=key, batch_size=batch_size, max_height=max_height,
+            sources=sources))
     V.check_film(film)
     V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
     V.check_choice("method", method, METHODS)
@@ -134,15 +149,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         raise ValueError("envmap_radiance has no bare-interface path (ModelOptions.layer): "
                          "use layer='auto' or 'film'")
     terms, shat = options.terms, options.shat
-    for name, v in (("normal", normal), ("view", view)):
-        if np.shape(v)[-1:] != (3,):
-            raise ValueError(f"{name} must have shape (..., 3), got {np.shape(v)}")
-        if V.is_concrete(v):
-            V.check_finite(name, v)
-            nrm = np.linalg.norm(np.asarray(v, float), axis=-1)
-            if np.any(np.abs(nrm - 1) > 1e-3):
-                raise ValueError(f"{name} must be unit vectors; got a norm of "
-                                 f"{nrm.flat[np.argmax(np.abs(nrm - 1))]:.6g}")
+    _check_directions(normal, view)
     shape = V.check_broadcast([("film", np.zeros(film.shape)), ("alpha", alpha),
                                ("normal", np.zeros(np.shape(normal)[:-1])),
                                ("view", np.zeros(np.shape(view)[:-1]))])
@@ -162,8 +169,9 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     if method == "khr" and pref.has_sources:
         raise ValueError("method='khr' shades the prefiltered map only (as glTF engines do): "
                          "prefilter it with sources=0")
-    dtype = jnp.result_type(alpha, normal, view, *film, float)
-    args = [jnp.broadcast_to(jnp.asarray(x, dtype), shape) for x in (*film, alpha)]
+    dtype = jnp.result_type(alpha, normal, view, *jax.tree.leaves(film), float)
+    film = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x, dtype), shape), film)
+    alpha = jnp.broadcast_to(jnp.asarray(alpha, dtype), shape)
     nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
     if realtime:
         if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
@@ -171,14 +179,64 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         cfg = (method, observer, terms, shat, bool(cross_band), arithmetic)
         if method == "improved":  # its (θ_o, α) tables travel with the map
             pref = (pref, bin_table(dtype=dtype))
-        return _realtime_jit(Film(*args[:5]), args[5], *nv, pref, cfg,
-                             int(batch_size or 65536))
-    return exact_radiance(Film(*args[:5]), args[5], *nv, env, method=method, observer=observer,
+        return _realtime_jit(film, alpha, *nv, pref, cfg, int(batch_size or 65536))
+    return exact_radiance(film, alpha, *nv, env, method=method, observer=observer,
                           cross_band=bool(cross_band), arithmetic=arithmetic,
                           one_film=film.shape == (), subdivisions=subdivisions, n_cos=n_cos,
                           n_samples=n_samples, key=key, batch_size=batch_size,
                           max_height=max_height)
 
+
+
+def _material_envmap(material, alpha, normal, view, envmap, method, observer, kw):
+    """`envmap_radiance` of a `Stack` or a dispersive `Film` (see there)."""
+    V.check_choice("method", method, METHODS)
+    V.check_choice("observer", observer, OBSERVERS)
+    require(method, dispersive=is_dispersive(material), stack=isinstance(material, Stack))
+    if not METHOD_INFO[method].exact:  # a dispersive single film, one band at a time
+        V.check_material(material, wavelengths=band_centroids(observer))
+        if not isinstance(envmap, PrefilteredEnvMap):  # prefilter once for the J bands
+            src = kw["sources"]
+            src = (DEFAULT_SOURCES if method == "improved" else 0) if src is None else src
+            envmap = prefilter_envmap(envmap if isinstance(envmap, EnvMap)
+                                      else load_envmap(envmap), observer=observer, sources=src)
+        lift = [jnp.asarray(alpha)[..., None]] + [jnp.asarray(v)[..., None, :]
+                                                  for v in (normal, view)]
+        kw = {k: v for k, v in kw.items() if k != "sources"}
+        out = envmap_radiance(band_film(material, observer), *lift, envmap, method=method,
+                              observer=observer, **kw)
+        return jnp.diagonal(out, axis1=-2, axis2=-1)
+    stack = V.check_material(material, wavelengths=get_observer(observer).wavelengths)
+    V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    _check_directions(normal, view)
+    shape = V.check_broadcast([("film", np.zeros(batch_shape(stack))), ("alpha", alpha),
+                               ("normal", np.zeros(np.shape(normal)[:-1])),
+                               ("view", np.zeros(np.shape(view)[:-1]))])
+    if isinstance(envmap, PrefilteredEnvMap):
+        raise ValueError(f"method={method!r} integrates the map itself: pass an EnvMap, "
+                         "not a PrefilteredEnvMap")
+    env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
+    dtype = jnp.result_type(alpha, normal, view, float)
+    alpha = jnp.broadcast_to(jnp.asarray(alpha, dtype), shape)
+    nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
+    return exact_radiance(stack, alpha, *nv, env, method=method, observer=observer,
+                          cross_band=bool(kw["cross_band"]), arithmetic="complex",
+                          one_film=batch_shape(stack) == (), subdivisions=kw["subdivisions"],
+                          n_cos=kw["n_cos"], n_samples=kw["n_samples"], key=kw["key"],
+                          batch_size=kw["batch_size"], max_height=kw["max_height"])
+
+
+def _check_directions(normal, view):
+    """normal and view: (..., 3), finite unit vectors (concrete)."""
+    for name, v in (("normal", normal), ("view", view)):
+        if np.shape(v)[-1:] != (3,):
+            raise ValueError(f"{name} must have shape (..., 3), got {np.shape(v)}")
+        if V.is_concrete(v):
+            V.check_finite(name, v)
+            nrm = np.linalg.norm(np.asarray(v, float), axis=-1)
+            if np.any(np.abs(nrm - 1) > 1e-3):
+                raise ValueError(f"{name} must be unit vectors; got a norm of "
+                                 f"{nrm.flat[np.argmax(np.abs(nrm - 1))]:.6g}")
 
 
 def _colour_table(film, alpha, normal, view, table, method, observer):
@@ -207,16 +265,20 @@ def _colour_table(film, alpha, normal, view, table, method, observer):
 def _realtime_jit(film, alpha, normal, view, pref, cfg, chunk):
     """Flatten the shading points and shade them `chunk` at a time (bounded memory)."""
     shape = alpha.shape
-    flat = [x.reshape(-1) for x in (*film, alpha)] + [v.reshape(-1, 3) for v in (normal, view)]
-    n = flat[0].shape[0]
+    flat = (jax.tree.map(lambda x: x.reshape(-1), film), alpha.reshape(-1),
+            normal.reshape(-1, 3), view.reshape(-1, 3))
+    n = flat[1].shape[0]
     if n <= chunk:
-        out = _realtime_points(Film(*flat[:5]), *flat[5:], pref, cfg)
+        out = _realtime_points(*flat, pref, cfg)
     else:
         m = -(-n // chunk)
-        padded = [jnp.pad(x, [(0, m * chunk - n)] + [(0, 0)] * (x.ndim - 1), mode="edge")
-                  for x in flat]
-        out = jax.lax.map(lambda xs: _realtime_points(Film(*xs[:5]), *xs[5:], pref, cfg),
-                          [x.reshape((m, chunk) + x.shape[1:]) for x in padded])
+
+        def block(x):  # pad to m whole chunks (edge values), one chunk per map step
+            x = jnp.pad(x, [(0, m * chunk - n)] + [(0, 0)] * (x.ndim - 1), mode="edge")
+            return x.reshape((m, chunk) + x.shape[1:])
+
+        out = jax.lax.map(lambda xs: _realtime_points(*xs, pref, cfg),
+                          jax.tree.map(block, flat))
         out = out.reshape(m * chunk, -1)[:n]
     return out.reshape(*shape, out.shape[-1])
 
@@ -272,7 +334,7 @@ def _map_points(film, alpha, normal, view, pref, cfg):
     else:
         if pref.per_channel:  # moments of channel k drive R_jk (..., 3[k], 9)
             mean, cov = moments_to_mean_cov(mom)
-            f3 = Film(*(jnp.asarray(x)[..., None] for x in film))
+            f3 = expand_batch(film)
             r = filtered_kernel(f3, view[..., None, :], mean, cov, observer=obs, terms=terms,
                                 shat=shat, lut=lut, arithmetic=arithmetic)
         else:

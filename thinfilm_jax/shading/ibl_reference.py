@@ -97,7 +97,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .envmap import EnvMap, _row_geometry, downsample, lookup_nearest, texel_solid_angles
-from ..core.film import Film
+from ..core.material import expand_batch, first_point, point_split
+from ..core.stack import Stack
 from ..brdf.microfacet import normal_distribution, smith_g1, smith_g2
 from ..spectral.reflectance import spectral_bands
 from ..spectral.uplift import cross_band_name
@@ -197,8 +198,7 @@ def _lobe_cos_weight(wi, n, wo, alpha):
 def _r_table(film, observer, n_cos, arithmetic, dtype):
     """R_jk (or R_j) at c = linspace(0, 1, n_cos): exact spectral bands."""
     c = jnp.linspace(0.0, 1.0, n_cos, dtype=dtype)
-    return spectral_bands(Film(*(jnp.asarray(x)[..., None] for x in film)), c, observer,
-                          arithmetic=arithmetic)
+    return spectral_bands(expand_batch(film), c, observer, arithmetic=arithmetic)
 
 
 def _interp(table, c):
@@ -531,16 +531,18 @@ def _adaptive_jit(film, alpha, normal, view, radiance, geo, extra, cfg):
     dtype = alpha.dtype
     obs = cross_band_name(observer) if cross else observer
     shape = alpha.shape
-    flat = [x.reshape(-1) for x in (*film, alpha)] + [v.reshape(-1, 3) for v in (normal, view)]
+    mat, point = point_split(film, shape)
+    flat = (mat, alpha.reshape(-1), normal.reshape(-1, 3), view.reshape(-1, 3))
     rad = jnp.concatenate([radiance.reshape(-1, 3), jnp.zeros((1, 3), dtype)])
-    shared = (_r_table(Film(*(x[0] for x in flat[:5])), obs, n_cos, arithmetic, dtype)
+    shared = (_r_table(point(first_point(mat)), obs, n_cos, arithmetic, dtype)
               if one_film else None)
 
     def one(xs):
-        table = shared if one_film else _r_table(Film(*xs[:5]), obs, n_cos, arithmetic, dtype)
-        return _adaptive_point(table, xs[5], xs[6], xs[7], geo, rad, (s, counts, cross))
+        m, a, n, wo = xs
+        table = shared if one_film else _r_table(point(m), obs, n_cos, arithmetic, dtype)
+        return _adaptive_point(table, a, n, wo, geo, rad, (s, counts, cross))
 
-    out, est = jax.lax.map(one, tuple(flat), batch_size=chunk)
+    out, est = jax.lax.map(one, flat, batch_size=chunk)
     cos_o = jnp.sum(normal * view, -1)
     up = cos_o > 0
     return (jnp.where(up[..., None], out.reshape(*shape, out.shape[-1]), 0.0),
@@ -556,26 +558,26 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
     dtype = alpha.dtype
     obs = cross_band_name(observer) if cross else observer
     shape = alpha.shape
-    flat = [x.reshape(-1) for x in (*film, alpha)] + [v.reshape(-1, 3) for v in (normal, view)]
-    n_pts = flat[0].shape[0]
+    mat, point = point_split(film, shape)
+    flat = (mat, alpha.reshape(-1), normal.reshape(-1, 3), view.reshape(-1, 3))
+    n_pts = flat[1].shape[0]
     if method == "reference":
         dirs, e = extra
         # one film for every shading point: its R_jk(cos θ₁) table is built once, not per point
-        shared_table = (_r_table(Film(*(x[0] for x in flat[:5])), obs, n_cos, arithmetic, dtype)
+        shared_table = (_r_table(point(first_point(mat)), obs, n_cos, arithmetic, dtype)
                         if one_film else None)
     else:
         keys = jax.random.split(extra, n_pts)
 
     def one(xs):
-        f = Film(*xs[:5])
-        a, n, wo = xs[5], xs[6], xs[7]
+        f, a, n, wo = point(xs[0]), xs[1], xs[2], xs[3]
         if method == "reference":
             wgt, c = _lobe_cos_weight(dirs, n, wo, a)  # (N,)
             table = shared_table if one_film else _r_table(f, obs, n_cos, arithmetic, dtype)
             r = _interp(table, c)  # (N, J[·3])
             light = wgt[:, None] * e  # (N, 3)
         else:
-            k = xs[8]
+            k = xs[4]
             u = jax.random.uniform(k, (s, 2), dtype)
             t, b = _local_frame(n)
             frame = jnp.stack([t, b, n])  # rows: local axes in world
@@ -589,12 +591,11 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
             g = smith_g2(jnp.where(ok, ci, 1.0), jnp.where(ok, co, 1.0), a) / smith_g1(
                 jnp.where(ok, co, 1.0), a)
             wgt = jnp.where(ok, g, 0.0) / s
-            r = spectral_bands(Film(*(jnp.asarray(x)[..., None] for x in f)), c, obs,
-                               arithmetic=arithmetic)
+            r = spectral_bands(expand_batch(f), c, obs, arithmetic=arithmetic)
             light = wgt[:, None] * lookup_nearest(radiance, wi)
         return _contract(r, light, cross)
 
-    xs = tuple(flat) + ((keys,) if method == "mc" else ())
+    xs = flat + ((keys,) if method == "mc" else ())
     out = jax.lax.map(one, xs, batch_size=batch)
     cos_o = jnp.sum(normal * view, -1)
     return jnp.where((cos_o > 0)[..., None], out.reshape(*shape, out.shape[-1]), 0.0)
@@ -618,7 +619,8 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
     instead of `refine_counts` (all blocks and all texels: the exhaustive rule's value)."""
     dtype = alpha.dtype
     n_pts = int(np.prod(alpha.shape))
-    one_film = bool(one_film) or all(_same(x) for x in film)
+    one_film = bool(one_film) or (not isinstance(film, Stack)
+                                  and all(_same(x) for x in jax.tree.leaves(film)))
     if method == "mc":
         if not (isinstance(n_samples, int) and n_samples >= 1):
             raise ValueError(f"n_samples must be a positive int, got {n_samples!r}")

@@ -43,7 +43,11 @@ import numpy as np
 from jax import Array
 
 from ..core import _validate as V
+from ..core.material import batch_shape, is_dispersive, needs_stack, point_split
+from ..core.methods import METHODS as METHOD_INFO
 from ..core.methods import names as method_names
+from ..core.methods import require
+from ..core.stack import Stack
 from ..optics.airy import choose_arithmetic
 from ..core.film import Film
 from ..realtime.filtered import filtered_bands
@@ -55,8 +59,9 @@ from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..optics.opd import cos_incidence_from_projection, opd_moments_exact, project_light_moments
 from ..realtime.options import ModelOptions, check_options
 from ..spectral.khr import khr_bands
-from ..spectral.reflectance import bare_bands, choose_layer, spectral_bands
-from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
+from ..spectral.reflectance import (band_centroids, bare_bands, choose_layer, per_band,
+                                    spectral_bands, stack_bands)
+from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 
 METHODS = method_names("patch")  # the registry's order (core/methods.py)
 
@@ -93,6 +98,9 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
         batch_size: patches evaluated together (memory of the reference is
             batch_size · n_u · n_φ · n_λ).
     """
+    if needs_stack(film):  # a Stack or a dispersive Film (SPEC §12)
+        return _material_patch(film, theta_o, alpha, method, observer, options, lut,
+                               batch_size)
     film, theta_o, alpha, options, shape = _check_patch_args(film, theta_o, alpha, method,
                                                              observer, options)
     batch_size = V.check_int("batch_size", batch_size, 1)
@@ -120,6 +128,47 @@ def _patch_jit(film, theta_o, alpha, tables, cfg, shape):
                          options=options, lut=lut, table=table)
 
     out = jax.lax.map(one, tuple(args), batch_size=min(batch, max(args[0].shape[0], 1)))
+    return out.reshape(*shape, out.shape[-1])
+
+
+def _material_patch(material, theta_o, alpha, method, observer, options, lut, batch_size):
+    """`patch_radiance` of a `Stack` or a dispersive `Film`: exact methods evaluate every
+    index at each of the observer's wavelengths; real-time ones take a dispersive single film
+    at each band's centroid (`spectral.reflectance.per_band`); the rest is a ValueError from
+    the registry naming what the method lacks."""
+    V.check_choice("method", method, METHODS)
+    V.check_choice("observer", observer, OBSERVERS)
+    require(method, dispersive=is_dispersive(material), stack=isinstance(material, Stack))
+    if not METHOD_INFO[method].exact:
+        V.check_material(material, wavelengths=band_centroids(observer))
+        return per_band(lambda f, t, a: patch_radiance(
+            f, t, a, method=method, observer=observer, options=options, lut=lut,
+            batch_size=batch_size), material, theta_o, alpha, observer=observer)
+    stack = V.check_material(material, wavelengths=get_observer(observer).wavelengths)
+    theta_o = V.check_angle("theta_o", theta_o)
+    alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    options = check_options(options)
+    shape = V.check_broadcast([("film", np.zeros(batch_shape(stack))), ("theta_o", theta_o),
+                               ("alpha", alpha)])
+    batch_size = V.check_int("batch_size", batch_size, 1)
+    return _stack_patch_jit(stack, theta_o, alpha, (observer, options.quadrature, options.ndf,
+                                                    batch_size), shape)
+
+
+@functools.partial(jax.jit, static_argnums=(3, 4))
+def _stack_patch_jit(stack, theta_o, alpha, cfg, shape):
+    observer, quadrature, ndf, batch = cfg
+    dtype = jnp.result_type(theta_o, alpha, float)
+    t, point = point_split(stack, shape)
+    th, al = (jnp.broadcast_to(jnp.asarray(x, dtype), shape).reshape(-1) for x in (theta_o, alpha))
+
+    def one(xs):
+        ti, tho, a = xs
+        quad = patch_quadrature(tho, a, quadrature=quadrature, ndf=ndf)
+        rj = stack_bands(point(ti), quad.cos_hi, observer)  # (N, J)
+        return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
+
+    out = jax.lax.map(one, (t.astype(dtype), th, al), batch_size=min(batch, max(th.shape[0], 1)))
     return out.reshape(*shape, out.shape[-1])
 
 
@@ -205,14 +254,23 @@ def patch_radiance_mc(film: Film, theta_o: float, alpha: float, key, *, n_sample
     `n_samples` ≥ 2 (the standard error needs two); film fields, θ_o and α scalars;
     `options` supplies ndf and arithmetic (the other fields do not apply).
     """
-    film, theta_o, alpha, options, shape = _check_patch_args(film, theta_o, alpha, "reference",
-                                                             observer, options)
+    if needs_stack(film):  # a Stack or a dispersive Film: the stack code (SPEC §12)
+        film = V.check_material(film, wavelengths=get_observer(observer).wavelengths)
+        theta_o = V.check_angle("theta_o", theta_o)
+        alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+        options = check_options(options)
+        shape = V.check_broadcast([("film", np.zeros(batch_shape(film))), ("theta_o", theta_o),
+                                   ("alpha", alpha)])
+        arithmetic = "complex"
+    else:
+        film, theta_o, alpha, options, shape = _check_patch_args(film, theta_o, alpha,
+                                                                 "reference", observer, options)
+        arithmetic = choose_arithmetic(film, options.arithmetic)
     if shape != ():
         raise ValueError(f"patch_radiance_mc evaluates one patch: film fields, theta_o and "
                          f"alpha must be scalars; got broadcast shape {shape}")
     n_samples = V.check_int("n_samples", n_samples, 2)
-    return _mc_jit(film, theta_o, alpha, key, n_samples, observer, options.ndf,
-                   choose_arithmetic(film, options.arithmetic))
+    return _mc_jit(film, theta_o, alpha, key, n_samples, observer, options.ndf, arithmetic)
 
 
 @functools.partial(jax.jit, static_argnums=(4, 5, 6, 7))

@@ -21,12 +21,17 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from ..core import _validate as V
 from ..core.methods import names as method_names
 from ..optics.airy import broadcast_all, choose_arithmetic, polarised_reflectance
 from ..core.film import Film
+from ..core.material import batch_shape, expand_batch, is_dispersive, needs_stack
+from ..core.methods import require
+from ..core.stack import Stack
+from ..optics.stack import stack_reflectance_traced
 from ..optics.fresnel import film_interfaces
 from ..optics.series import fourier_band_reflectance, series_terms
 from .khr import _khr_jit
@@ -90,10 +95,21 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
         >>> rgb_reflectance(film, 1.0).shape
         (3,)
     """
-    film = V.check_film(film)
-    cos_theta = V.check_cos_theta(cos_theta)
     V.check_choice("observer", observer, ("stiles_burch_1959_10", "cie_1931_2"))
     V.check_choice("method", method, METHODS)
+    if needs_stack(film):  # a Stack, or a Film with index models (SPEC §12)
+        require(method, dispersive=is_dispersive(film), stack=isinstance(film, Stack))
+        if method == "fourier":  # a dispersive single film: indices at each band's centroid
+            V.check_material(film, wavelengths=band_centroids(observer))
+            return per_band(lambda f, c: rgb_reflectance(
+                f, c, observer=observer, method=method, terms=terms, shat=shat,
+                arithmetic=arithmetic, layer=layer), film, cos_theta, observer=observer)
+        stack = V.check_material(film, wavelengths=get_observer(observer).wavelengths)
+        cos_theta = V.check_cos_theta(cos_theta)
+        V.check_broadcast([("film", np.zeros(batch_shape(stack))), ("cos_theta", cos_theta)])
+        return _stack_rgb_jit(stack, cos_theta, observer)
+    film = V.check_film(film)
+    cos_theta = V.check_cos_theta(cos_theta)
     V.check_choice("shat", shat, SHAT_METHODS)
     # any integer type (np.arange(...) elements too), not bool; a plain int for the jit cache
     terms = V.check_int("terms", terms, 0)
@@ -120,8 +136,63 @@ def _rgb_jit(film, cos_theta, observer, method, terms, shat, arithmetic, layer):
     return fourier_bands(film, c, observer, terms=terms, shat=shat, arithmetic=arithmetic)
 
 
+def band_centroids(observer=DEFAULT_OBSERVER) -> np.ndarray:
+    """λ̄_j = Σ_k W⁺_kj λ_k / Σ_k W⁺_kj (nm, (J,)), the centroid of band j's positive part
+    (Stiles & Burch's colour-matching functions have negative lobes, left out here)."""
+    obs = get_observer(observer)
+    w = np.maximum(np.asarray(obs.weights, float), 0.0)
+    return (w * np.asarray(obs.wavelengths, float)[:, None]).sum(0) / w.sum(0)
+
+
+def band_film(film: Film, observer=DEFAULT_OBSERVER) -> Film:
+    """The constant-index film of each band: a dispersive film's indices evaluated at the band
+    centroids `band_centroids` (fields of shape (J,), band j in entry j). The real-time
+    methods' approximation of dispersion (core/methods.py: ``dispersion="bands"``): each band
+    sees the film at one wavelength. The film's and outer medium's κ are dropped (K 29 has no
+    absorbing film); the base keeps n + iκ. Measured error: docs/how-to/materials.md."""
+    lam = band_centroids(observer)
+
+    def at(x):
+        return x(jnp.asarray(lam)) if V._is_model(x) else jnp.asarray(x)
+
+    eb = at(film.eta_base)
+    return Film(jnp.asarray(film.thickness), jnp.real(at(film.eta_film)), jnp.real(eb),
+                jnp.imag(eb) + jnp.asarray(film.kappa_base), jnp.real(at(film.eta_outer)))
+
+
+def per_band(fn, film: Film, *args, observer=DEFAULT_OBSERVER):
+    """``fn(film, *args)`` (..., J) of a dispersive single film, band j computed with the film
+    at band j's centroid (`band_film`): fn runs once on a film batched over a trailing band
+    axis (the other arguments get a unit axis) and the diagonal is kept."""
+    if not isinstance(film, Film) or np.ndim(film.thickness) != 0:
+        raise ValueError("the real-time methods take a dispersive Film with a scalar thickness "
+                         "(vmap over thicknesses); a Stack needs an exact method")
+    bf = band_film(film, observer)
+    out = fn(bf, *(jnp.asarray(a)[..., None] for a in args))
+    return jnp.diagonal(out, axis1=-2, axis2=-1)
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def _stack_rgb_jit(stack, cos_theta, observer):
+    return stack_bands(stack, cos_theta, observer)
+
+
+def stack_bands(stack: Stack, cos_theta, observer=DEFAULT_OBSERVER):
+    """Σ_k W_kj R(θ₁, λ_k) of a `Stack` (`optics.stack`; every index evaluated at each λ_k):
+    shape broadcast(batch, cos θ₁) + (J,). No validation."""
+    obs = get_observer(observer)
+    dtype = jnp.result_type(cos_theta, float)
+    lam = jnp.asarray(obs.wavelengths, dtype)
+    r = stack_reflectance_traced(expand_batch(stack), jnp.asarray(cos_theta, dtype)[..., None],
+                                 lam)
+    return jnp.matmul(r, jnp.asarray(obs.weights, r.dtype), precision=jax.lax.Precision.HIGHEST)
+
+
 def spectral_bands(film: Film, cos_theta, observer=DEFAULT_OBSERVER, *, arithmetic="complex"):
-    """Σ_k W_kj R(θ₁, λ_k): exact band reflectance (broadcast inputs, no validation)."""
+    """Σ_k W_kj R(θ₁, λ_k): exact band reflectance (broadcast inputs, no validation); a
+    `Stack` runs `stack_bands`."""
+    if isinstance(film, Stack):
+        return stack_bands(film, cos_theta, observer)
     obs = get_observer(observer)
     dtype = jnp.result_type(cos_theta, float)
     lam = jnp.asarray(obs.wavelengths, dtype)

@@ -15,13 +15,14 @@ Capabilities, per method:
   (real-time: the indices of a dispersive single film at each band's centroid wavelength,
   one evaluation per band, docs/how-to/materials.md gives the measured ΔE₀₀) or "" (constant
   indices only).
-* ``stacks``: models a multi-layer `Stack` exactly.
+* ``stacks``: models a multi-layer `Stack` (the references exactly; ``ideal`` with the exact
+  bands at h = n, tabulated once per homogeneous stack under a map).
 
 Example:
     >>> names("envmap")
     ('reference', 'mc', 'ideal', 'filtered', 'improved', 'khr', 'colour_table')
-    >>> METHODS["filtered"].stacks, METHODS["reference"].stacks
-    (False, True)
+    >>> METHODS["filtered"].stacks, METHODS["reference"].stacks, METHODS["ideal"].stacks
+    (False, True, True)
 """
 
 from __future__ import annotations
@@ -49,8 +50,9 @@ _ROWS = (
            "converged quadrature of the exact spectral reflectance"),
     Method("mc", ("envmap",), True, "exact", True,
            "importance-sampled Monte Carlo of the exact reflectance"),
-    Method("ideal", ("patch", "envmap"), False, "bands", False,
-           "BB17 at h = n times the split-sum albedo"),
+    Method("ideal", ("patch", "envmap"), False, "exact", True,
+           "BB17 at h = n times the split-sum albedo (a Stack or dispersive film: its exact "
+           "bands at h = n, tabulated over cos θ under a map)"),
     Method("filtered_gt_moments", ("patch",), False, "bands", False,
            "K 29 with the true light moments (Figure 7 (b), (f))"),
     Method("filtered_gt_opd", ("patch",), False, "bands", False,

@@ -69,7 +69,7 @@ from ..spectral.khr import khr_bands
 from ..spectral.lut import build_shat_lut
 from ..realtime.options import ModelOptions, check_options
 from .prefilter import (PrefilteredEnvMap, bin_radiance_parts, lookup_albedo, lookup_prefiltered,
-                        moments_to_mean_cov, prefilter_envmap)
+                        lookup_radiance, moments_to_mean_cov, prefilter_envmap)
 from .sources import source_radiance
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from ..spectral.uplift import cross_band_name
@@ -193,6 +193,8 @@ def _material_envmap(material, alpha, normal, view, envmap, method, observer, kw
     V.check_choice("method", method, METHODS)
     V.check_choice("observer", observer, OBSERVERS)
     require(method, dispersive=is_dispersive(material), stack=isinstance(material, Stack))
+    if method == "ideal":  # a homogeneous material's exact R_jk(cos θ) table
+        return _tabulated_ideal(material, alpha, normal, view, envmap, observer, kw)
     if not METHOD_INFO[method].exact:  # a dispersive single film, one band at a time
         V.check_material(material, wavelengths=band_centroids(observer))
         if not isinstance(envmap, PrefilteredEnvMap):  # prefilter once for the J bands
@@ -224,6 +226,50 @@ def _material_envmap(material, alpha, normal, view, envmap, method, observer, kw
                           one_film=batch_shape(stack) == (), subdivisions=kw["subdivisions"],
                           n_cos=kw["n_cos"], n_samples=kw["n_samples"], key=kw["key"],
                           batch_size=kw["batch_size"], max_height=kw["max_height"])
+
+
+def _tabulated_ideal(material, alpha, normal, view, envmap, observer, kw):
+    """`ideal` for a `Stack` or a dispersive `Film` with one set of thicknesses (a homogeneous
+    material): the split sum A(θ_o, α) Σ_k R_jk(cos θ_o) P_k(ω_r, α) with R_jk the exact cross
+    bands tabulated once over cos θ (`n_cos` nodes, linear interpolation) instead of BB17's
+    M-term series: the table an engine would upload per material."""
+    stack = V.check_material(material, wavelengths=get_observer(observer).wavelengths)
+    if batch_shape(stack) != ():
+        raise ValueError("method='ideal' tabulates one homogeneous material: its thicknesses "
+                         "must not vary per point (use method='reference', or vmap)")
+    V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    _check_directions(normal, view)
+    shape = V.check_broadcast([("alpha", alpha), ("normal", np.zeros(np.shape(normal)[:-1])),
+                               ("view", np.zeros(np.shape(view)[:-1]))])
+    pref = envmap
+    if not isinstance(pref, PrefilteredEnvMap):
+        pref = prefilter_envmap(envmap if isinstance(envmap, EnvMap) else load_envmap(envmap),
+                                observer=observer, sources=kw["sources"] or 0)
+    if pref.has_sources:
+        raise ValueError("method='ideal' of a tabulated material shades the prefiltered map "
+                         "only: prefilter it with sources=0")
+    dtype = jnp.result_type(alpha, normal, view, float)
+    cross = bool(kw["cross_band"])
+    obs = cross_band_name(observer) if cross else observer
+    table = _r_table(stack, obs, int(kw["n_cos"]), "complex", dtype)
+    alpha = jnp.broadcast_to(jnp.asarray(alpha, dtype), shape)
+    nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
+    return _tabulated_ideal_jit(table, alpha, *nv, pref, cross)
+
+
+@functools.partial(jax.jit, static_argnums=5)
+def _tabulated_ideal_jit(table, alpha, normal, view, pref, cross):
+    cos_o = jnp.sum(normal * view, axis=-1)
+    up = cos_o > 0
+    co = jnp.where(up, cos_o, 1.0)
+    sqa = jnp.sqrt(alpha)
+    rad = lookup_radiance(pref, 2 * co[..., None] * normal - view, sqa)
+    r = _interp(table, co)
+    if cross:
+        out = jnp.sum(r.reshape(r.shape[:-1] + (-1, 3)) * rad[..., None, :], axis=-1)
+    else:
+        out = r * rad
+    return jnp.where(up[..., None], lookup_albedo(pref, co, sqa)[..., None] * out, 0.0)
 
 
 def _check_directions(normal, view):

@@ -133,13 +133,14 @@ def _patch_jit(film, theta_o, alpha, tables, cfg, shape):
 
 def _material_patch(material, theta_o, alpha, method, observer, options, lut, batch_size):
     """`patch_radiance` of a `Stack` or a dispersive `Film`: exact methods evaluate every
-    index at each of the observer's wavelengths; real-time ones take a dispersive single film
-    at each band's centroid (`spectral.reflectance.per_band`); the rest is a ValueError from
-    the registry naming what the method lacks."""
+    index at each of the observer's wavelengths; "ideal" is A(θ_o, α) times the exact bands at
+    h = n (what a per-material table R_j(cos θ) gives an engine); the other real-time ones
+    take a dispersive single film at each band's centroid (`spectral.reflectance.per_band`);
+    the rest is a ValueError from the registry naming what the method lacks."""
     V.check_choice("method", method, METHODS)
     V.check_choice("observer", observer, OBSERVERS)
     require(method, dispersive=is_dispersive(material), stack=isinstance(material, Stack))
-    if not METHOD_INFO[method].exact:
+    if not METHOD_INFO[method].exact and method != "ideal":
         V.check_material(material, wavelengths=band_centroids(observer))
         return per_band(lambda f, t, a: patch_radiance(
             f, t, a, method=method, observer=observer, options=options, lut=lut,
@@ -151,13 +152,13 @@ def _material_patch(material, theta_o, alpha, method, observer, options, lut, ba
     shape = V.check_broadcast([("film", np.zeros(batch_shape(stack))), ("theta_o", theta_o),
                                ("alpha", alpha)])
     batch_size = V.check_int("batch_size", batch_size, 1)
-    return _stack_patch_jit(stack, theta_o, alpha, (observer, options.quadrature, options.ndf,
-                                                    batch_size), shape)
+    return _stack_patch_jit(stack, theta_o, alpha, (method, observer, options.quadrature,
+                                                    options.ndf, batch_size), shape)
 
 
 @functools.partial(jax.jit, static_argnums=(3, 4))
 def _stack_patch_jit(stack, theta_o, alpha, cfg, shape):
-    observer, quadrature, ndf, batch = cfg
+    method, observer, quadrature, ndf, batch = cfg
     dtype = jnp.result_type(theta_o, alpha, float)
     t, point = point_split(stack, shape)
     th, al = (jnp.broadcast_to(jnp.asarray(x, dtype), shape).reshape(-1) for x in (theta_o, alpha))
@@ -165,6 +166,8 @@ def _stack_patch_jit(stack, theta_o, alpha, cfg, shape):
     def one(xs):
         ti, tho, a = xs
         quad = patch_quadrature(tho, a, quadrature=quadrature, ndf=ndf)
+        if method == "ideal":  # A(θ_o, α) · R_j(cos θ_o), the exact bands at h = n
+            return jnp.sum(quad.weight) * stack_bands(point(ti), jnp.cos(tho), observer)
         rj = stack_bands(point(ti), quad.cos_hi, observer)  # (N, J)
         return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
 

@@ -94,7 +94,7 @@ def test_unpolarised_is_the_mean(absorbing):
 
 
 def test_lossless_conserves_energy():
-    """Lossless layers on a lossless base: R + T = 1; measured max |R + T − 1| 2.2e-15."""
+    """Lossless layers on a lossless base: R + T = 1; measured max |R + T − 1| 1.6e-15."""
     d, n, base, _ = random_stacks(2, lossless=True)
     stack = as_stack(d, n, base)
     total = stack_reflectance(stack, COS, LAM) + stack_transmittance(stack, COS, LAM)
@@ -142,7 +142,7 @@ def test_thick_metal_is_bulk(dtype):
 
 def test_float32_close_to_float64(absorbing):
     """float32 is finite and within 1e-3 of float64 everywhere on the random set; measured
-    max |ΔR| 1.2e-6, |ΔT| 6e-7."""
+    max |ΔR| 1.3e-6, |ΔT| 9e-7."""
     stack, _ = absorbing
     s32 = Stack(jnp.asarray(stack.thickness, jnp.float32),
                 tuple(jnp.asarray(e, jnp.complex64) for e in stack.eta),
@@ -158,7 +158,7 @@ def test_float32_close_to_float64(absorbing):
 @pytest.mark.parametrize("kappa", [0.0, 0.5])
 def test_film_is_one_layer_stack(kappa):
     """`Stack.from_film(f)` gives `airy_reflectance(f)` (dielectric and absorbing bases,
-    0–90°, 0–2 µm); measured max |ΔR| 3.3e-16 (κ = 0), 9.7e-16 (κ = 0.5)."""
+    0–90°, 0–2 µm); measured max |ΔR| 2.2e-16 (κ = 0), 9.7e-16 (κ = 0.5)."""
     d = np.array([0.0, 120.0, 600.0, 2000.0])[:, None, None]
     film = Film(d, 1.33, 2.0, kappa)
     cos = np.cos(np.radians([0.0, 30.0, 60.0, 80.0, 90.0]))[:, None]

@@ -61,19 +61,93 @@ def _bench(args) -> int:
 
 
 def _render(args) -> int:
+    """`thinfilm-jax render`: one's own scene (sphere, bubble; `studies.scene`) or the study
+    scenes (`studies.render`). Options that do not fit the scene are usage errors."""
+    from ..studies.scene import OWN_SCENES, default_out_dir
+
+    scenes = args.scene or ["sphere"]
+    own = [s for s in scenes if s in OWN_SCENES]
+    fail = args.render_parser.error
+    if own and (len(scenes) > 1):
+        fail(f"--scene {own[0]} renders one scene alone; got {scenes}")
+    own_opts = {"--thickness": args.thickness, "--eta-film": args.film_index,
+                "--eta-base": args.base_index, "--layers": args.layers, "--alpha": args.alpha,
+                "--thickness-range": args.thickness_range, "--elevation": args.elevation}
+    if not own:
+        given = [k for k, v in own_opts.items() if v is not None]
+        if given:
+            fail(f"options of --scene sphere / bubble only: {', '.join(given)} (got --scene "
+                 f"{' '.join(scenes)})")
+    out = args.out if args.out is not None else str(default_out_dir())
     devices = _devices(args)
     _enable_x64()
+    if own:
+        return _render_scene(args, own[0], out, fail)
+    from pathlib import Path
+
     from ..studies.render import RenderConfig, run_render, summary_table
 
-    kw = {k: tuple(v) for k, v in (("envmaps", args.envmap), ("scenes", args.scene),
+    kw = {k: tuple(v) for k, v in (("envmaps", args.envmap), ("scenes", scenes),
                                    ("methods", args.method), ("alphas", args.alphas)) if v}
     if args.alphas and not all(0 < a <= 1 for a in args.alphas):
         raise ValueError(f"--alphas must lie in (0, 1], got {args.alphas}")
-    cfg = RenderConfig(resolution=args.resolution, exposure=args.exposure,
+    cfg = RenderConfig(resolution=args.resolution or 64, exposure=args.exposure,
                        observer=args.observer, ldr_srgb=args.ldr_srgb, **kw)
-    summary = run_render(cfg, out_dir=args.out, progress=not args.quiet, devices=devices)
-    print(f"wrote {args.out}/ibl_{{{','.join(cfg.scenes)}}}.png, ibl_render.json, ibl_render.npz")
+    summary = run_render(cfg, out_dir=out, progress=not args.quiet, devices=devices)
+    files = [Path(out) / f"ibl_{s}.png" for s in cfg.scenes]
+    files += [Path(out) / "ibl_render.json", Path(out) / "ibl_render.npz"]
+    print("wrote " + ", ".join(str(f) for f in files))
     print(summary_table(summary))
+    return 0
+
+
+def _render_scene(args, scene: str, out: str, fail) -> int:
+    """--scene sphere | bubble (`studies.scene.render_scene`)."""
+    from pathlib import Path
+
+    from ..studies.scene import SceneConfig, format_summary, make_material, render_scene
+
+    if args.envmap and len(args.envmap) > 1:
+        fail(f"--scene {scene} renders under one map; got {len(args.envmap)} --envmap")
+    kw = dict(scene=scene, resolution=args.resolution or 128, exposure=args.exposure,
+              observer=args.observer, ldr_srgb=args.ldr_srgb, elevation_deg=args.elevation)
+    if args.envmap:
+        kw["envmap"] = args.envmap[0]
+    if scene == "sphere":
+        if args.thickness_range is not None:
+            fail("--thickness-range applies to --scene bubble (use --thickness)")
+        if args.layers is not None and (args.thickness is not None
+                                        or args.film_index is not None):
+            fail("--layers replaces --thickness and --eta-film (give one or the other)")
+        kw["material"] = make_material(
+            600.0 if args.thickness is None else args.thickness,
+            1.2 if args.film_index is None else args.film_index,
+            2.0 if args.base_index is None else args.base_index, layers=args.layers)
+        if args.alpha is not None:
+            kw["alpha"] = args.alpha
+        if args.method:
+            kw["methods"] = tuple(args.method)
+    else:
+        given = [k for k, v in (("--thickness", args.thickness), ("--layers", args.layers),
+                                ("--eta-base", args.base_index), ("--alpha", args.alpha),
+                                ("--method", args.method)) if v is not None]
+        if given:
+            fail(f"not an option of --scene bubble: {', '.join(given)} (a free-standing film, "
+                 "air on both sides, mirror-smooth, exact; it takes --eta-film and "
+                 "--thickness-range)")
+        if args.film_index is not None:
+            kw["eta_film"] = args.film_index
+        if args.thickness_range is not None:
+            kw["thickness_top"], kw["thickness_bottom"] = args.thickness_range
+    try:
+        cfg = SceneConfig(**kw)
+    except ValueError as e:  # a method that cannot model the material: usage
+        fail(str(e))
+    summary = render_scene(cfg, out_dir=out, progress=not args.quiet)
+    print(f"wrote {len(summary['files'])} files into {out}: "
+          + ", ".join(Path(f).name for f in summary["files"]))
+    print(format_summary(summary))
+    print(f"total {summary['total_seconds']:.1f} s")
     return 0
 
 
@@ -82,6 +156,30 @@ def _fit(args) -> int:
     from .fit import run_fit_cli
 
     return run_fit_cli(args)
+
+
+def _index_arg(option: str):
+    """argparse type of an index option: a usage error (exit 2) names the bundled materials."""
+    def parse(text):
+        from ..studies.scene import parse_index
+
+        try:
+            return parse_index(text, option)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    parse.__name__ = option  # argparse's "invalid <name> value" if it ever shows
+    return parse
+
+
+def _layers_arg(text):
+    """argparse type of --layers (`studies.scene.parse_layers`)."""
+    from ..studies.scene import parse_layers
+
+    try:
+        return parse_layers(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -148,38 +246,70 @@ def build_parser() -> argparse.ArgumentParser:
     from ..shading.envmap import SHIPPED
     from ..studies.render import METHODS as RENDER_METHODS
 
-    rd = sub.add_parser("render", help="spheres under environment maps (Kneiphof Figs. 3-6)",
-                        description="Render spheres under environment maps with the chosen "
-                                    "methods side by side (improved shades the map's suns "
-                                    "apart), with CIEDE2000 maps; writes ibl_<scene>.png, "
-                                    "ibl_render.json and ibl_render.npz into --out (SPEC §9).")
+    rd = sub.add_parser("render", help="a film or stack on a sphere, a soap bubble, or the "
+                        "study scenes (Kneiphof Figs. 3-6), under an environment map",
+                        description="Render one's own film or layer stack on a sphere (--scene "
+                                    "sphere, the default: one linear EXR and one sRGB PNG per "
+                                    "method, ΔE₀₀ maps against the reference, composite.png, "
+                                    "render.npz, render.json), a soap bubble (--scene bubble), "
+                                    "or the study scenes fig4/fig3/varying/carpaint (ibl_<scene>"
+                                    ".png, ibl_render.json, ibl_render.npz) into --out "
+                                    "(default: a new folder render-YYYYmmdd-HHMMSS; SPEC §9, "
+                                    "§12). See docs/how-to/render.md.")
     rd.add_argument("--envmap", action="append", metavar="PATH_OR_NAME",
-                    help=f"a .hdr/.exr file or a shipped map {sorted(SHIPPED)} (repeatable; "
-                         "default: the four shipped maps)")
+                    help=f"a .hdr/.exr file or a shipped map {sorted(SHIPPED)} (sphere, "
+                         "bubble: one, default venice_sunset; study scenes: repeatable, "
+                         "default the four shipped maps)")
     rd.add_argument("--ldr-srgb", dest="ldr_srgb", action="store_true",
                     help="read 8-/16-bit map files (PNG, JPEG) as sRGB, decoded to relative "
                          "radiance (white = 1); without it they are refused: display values "
                          "are not radiance")
-    rd.add_argument("--scene", action="append", choices=["fig4", "fig3", "varying", "carpaint"],
-                    help="fig4: α=0.25, d=600 nm, η₂=1.2, η₃=2.0; fig3: roughness sweep, "
-                         "η₂=1.3, η₃=2.0+0.5i, d=650 nm; varying: thickness texture; "
-                         "carpaint: the example car paints, exact reference vs Kneiphof & "
-                         "Klein 2022's colour table (repeatable; default: fig4, fig3, varying)")
+    rd.add_argument("--scene", action="append",
+                    choices=["sphere", "bubble", "fig4", "fig3", "varying", "carpaint"],
+                    help="sphere (default): your film or stack (--thickness, --eta-film, "
+                         "--eta-base, --layers, --alpha); bubble: a free-standing water film "
+                         "thin at the top, thick at the bottom (--eta-film, "
+                         "--thickness-range); study scenes (repeatable): fig4: α=0.25, "
+                         "d=600 nm, η₂=1.2, η₃=2.0; fig3: roughness sweep, η₂=1.3, "
+                         "η₃=2.0+0.5i, d=650 nm; varying: thickness texture; carpaint: the "
+                         "example car paints, exact reference vs Kneiphof & Klein 2022's "
+                         "colour table")
+    rd.add_argument("--thickness", type=float, help="sphere: film thickness, nm (600)")
+    rd.add_argument("--eta-film", dest="film_index", type=_index_arg("--eta-film"),
+                    metavar="N|N+Kj|NAME|FILE",
+                    help="film index: a number, a bundled material name (SiO2, Si3N4, "
+                         "water, ...), or a refractiveindex.info .yml / .csv file (sphere: "
+                         "1.2; bubble: water)")
+    rd.add_argument("--eta-base", dest="base_index", type=_index_arg("--eta-base"),
+                    metavar="N|N+Kj|NAME|FILE",
+                    help="sphere: base index, e.g. 2.0+0.5j, Si, Au, or a file (2.0)")
+    rd.add_argument("--layers", type=_layers_arg, metavar="MAT:NM[,MAT:NM...]",
+                    help="sphere: a layer stack instead of one film, layer 0 facing the air, "
+                         "e.g. \"SiO2:250,Si3N4:80\" on --eta-base Si (stacks and dispersive "
+                         "films need an exact method: reference, mc)")
+    rd.add_argument("--alpha", type=float, help="sphere: GGX roughness α in (0, 1] (0.25)")
+    rd.add_argument("--thickness-range", dest="thickness_range", type=float, nargs=2,
+                    metavar=("TOP", "BOTTOM"), help="bubble: film thickness at the top and "
+                    "the bottom, nm (30 1200); d = top + (bottom - top)·sqrt(ψ/π)")
+    rd.add_argument("--elevation", type=float, help="sphere, bubble: camera elevation above "
+                    "the horizon, degrees (sphere 15, bubble 30)")
     rd.add_argument("--method", action="append",
                     choices=RENDER_METHODS,
-                    help="methods, in columns (repeatable; default reference, ideal, "
-                         "filtered, improved)")
+                    help="methods, in columns (repeatable; sphere default: reference, "
+                         "improved; study scenes: reference, ideal, filtered, improved)")
     rd.add_argument("--alphas", type=float, nargs="+", help="α of the fig3 sweep "
                     "(0.05 0.15 0.3 0.6)")
-    rd.add_argument("--resolution", type=int, default=64, help="pixels per sphere side (64)")
-    rd.add_argument("--exposure", type=float, help="display exposure (default: per row, the "
+    rd.add_argument("--resolution", type=int, help="pixels per image side (sphere, bubble: "
+                    "128; study scenes: 64)")
+    rd.add_argument("--exposure", type=float, help="display exposure (default: the "
                     "reference's 99th-percentile luminance to 0.9)")
     rd.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"],
                     default="stiles_burch_1959_10")
-    rd.add_argument("--out", default="figures", help="output folder (default: figures)")
+    rd.add_argument("--out", help="output folder (default: a new folder "
+                    "render-YYYYmmdd-HHMMSS in the current directory)")
     rd.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_device_options(rd)
-    rd.set_defaults(func=_render)
+    rd.set_defaults(func=_render, render_parser=rd)
 
     from . import fit as fit_cli
 

@@ -1,0 +1,627 @@
+r"""One's own scene for `thinfilm-jax render`: a film or stack on a sphere, and a soap bubble.
+
+Camera (both scenes). A pinhole at distance `DISTANCE` = 5 from the centre of a unit sphere,
+looking at it from `elevation_deg` above the horizon (z-up, SPEC §9) at the azimuth that puts
+the map's brightest texel behind the camera, off to one side (`render._view_azimuth`); the
+field of view makes the sphere fill 87 % of the frame. Pixel (i, j) casts the ray
+o + t ω (ω unit), hits the sphere at p (outward normal n = p) where ω reaches it, and its view
+vector is ω_o = −ω. Pixels that miss the sphere, or graze it (⟨n, ω_o⟩ < 0.02), show the map
+itself in the direction ω (bilinear, `envmap.lookup_bilinear`).
+
+Colour. The map's linear RGB c(ω) is the spectrum Σ_k c_k B_k(λ) of the Mallett–Yuksel
+basis (SPEC §9, `spectral.uplift`); seen in a perfect mirror its band j is
+Σ_k M_jk c_k with M_jk = ∫ S_j B_k dλ (`bands_of_rgb`), so the background and the sphere are
+in the same bands. Every image is kept in the observer's bands (the NPZ) and converted once:
+bands → XYZ (`colorimetry.bands_to_xyz`) → linear sRGB with the mirror white adapted to D65
+(CAT02, colour-science; `bands_to_linear_srgb`, the EXR, unexposed) and → display sRGB
+(`colorimetry.bands_to_srgb` at the exposure, IEC 61966-2-1 encoding, clipped: the PNG).
+
+Sphere (`--scene sphere`): `envmap_radiance(material, α, n, ω_o, map, method=m)` per pixel
+for each method m; the reference in chunks of `CHUNK` points (a progress bar), on the map
+resampled once as `envmap_radiance(max_height=256)` would resample it
+(`ibl_reference.resample_factor`: a map taller than 256 rows is box-filtered, solid-angle
+exact, by the largest power of two f with texel f·π/H ≤ α/8 and H/f ≥ 128: a 1k map
+(512 rows) by 4 to 128 × 256 at α = 0.25); the real-time methods read the map prefiltered
+once (`render.method_map`: `improved` with its suns split off). ΔE₀₀ per pixel against the
+reference, exposure-scaled, mirror white Y = 1 (`colorimetry.delta_e2000`).
+
+Bubble (`--scene bubble`). A free-standing film (air | η₂ | air, default water,
+`refractive_index("water")`, Daimon & Masumura 2007) on the unit sphere, smooth (a mirror on
+both faces). Its thickness follows a draining film: the vertical-film law of Mysels, Shinoda &
+Frankel (1959, *Soap Films: Studies of their Thinning*), h ∝ √x at depth x below the top for
+surfaces that do not move, with x the arc length from the top pole and a black film at the
+top (`bubble_thickness`):
+
+$$ d(p) = d_{top} + (d_{bottom} - d_{top})\sqrt{\psi/\pi},\qquad \psi = \arccos p_z , $$
+
+default d_top = 30 nm (a common black film), d_bottom = 1200 nm. A thin film between two air
+half-spaces does not deviate a ray, and on a sphere every chord meets the surface at the
+same angle at both ends, so a pixel ray (direction ω, cos θ = ⟨n, ω_o⟩) that enters at p₁
+reaches p₂ = p₁ + 2 cos θ ω, reflects inside into ω' = ω − 2⟨ω, p₂⟩p₂, reaches
+p₃ = p₂ + 2 cos θ ω', and so on, all at the one angle θ and in one plane (the plane of
+incidence of every event), so s and p polarisation are carried separately along the path:
+
+$$ L(\lambda) = \tfrac12\sum_{\sigma=s,p}\Big[R_\sigma(d_1) L(\omega_r)
+   + T_\sigma(d_1) T_\sigma(d_2) L(\omega)
+   + \sum_{m=1}^{M} T_\sigma(d_1)\Big(\prod_{i=2}^{m+1} R_\sigma(d_i)\Big)
+     T_\sigma(d_{m+2}) L(\omega^{(m)})\Big], $$
+
+ω_r = 2⟨n, ω_o⟩n − ω_o the mirror direction, ω the straight-through one (the map behind the
+bubble), ω^{(m)} the direction after m inner reflections. R, T = `stack_reflectance`,
+`stack_transmittance` of the one-layer stack, exact and spectral at the observer's
+wavelengths; M = `SceneConfig.orders` inner reflections (default 1: the first order, the
+far wall's reflection a bubble shows). The orders left out carry ½ Σ_σ T_σ² R_σ^{M+1}/(1 − R_σ)
+of a uniform film's light (R + T = 1): at M = 1 and d ∈ [0, 2 µm] at most 0.6 % at normal
+incidence (R ≤ 0.083), 4.5 % at 60° (R_s ≤ 0.38), 13 % at cos θ = 0.2, i.e. near the rim,
+where the bubble is bright and the truncation darkens it slightly. Band j takes the spectral
+factor of each term against the map's spectrum through the cross bands S_j B_k (SPEC §9, the
+R_jk of the IBL reference, no per-channel approximation):
+L_j = Σ_k Σ_i W_ij B_k(λ_i) F(λ_i) c_k(ω_term). With d → 0, R = 0 and T = 1: the bubble
+shows the map straight through (the background's values); for the lossless water film
+R + T = 1 at every λ, and with all orders and a uniform thickness the white map's band
+values sum to 1 (R + T²/(1 − R) = 1); tests/cli/test_render_scene.py checks the three.
+
+Example (a quarter-degree check of the camera: the sphere's centre pixel looks straight back
+along its normal):
+    >>> import numpy as np
+    >>> eye, dirs = pinhole(9, 0.0, 15.0)
+    >>> mask, p, cos = hit_sphere(eye, dirs)
+    >>> bool(mask[4, 4]), bool(np.isclose(cos[4, 4], 1.0))
+    (True, True)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import textwrap
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core._io import atomic_write, write_json
+from ..core.film import Film
+from ..core.material import is_dispersive
+from ..core.methods import METHODS as METHOD_INFO
+from ..core.methods import require
+from ..core.stack import Stack
+from ..optics.index import is_index_model
+from ..optics.materials import MATERIALS, refractive_index
+from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000, white_xy
+from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
+from ..spectral.uplift import basis_on
+
+OWN_SCENES = ("sphere", "bubble")
+DISTANCE = 5.0  # camera distance / sphere radius
+FILL = 0.87  # the sphere's diameter / the frame's side
+GRAZING = 0.02  # pixels with ⟨n, ω_o⟩ below this show the map
+CHUNK = 1024  # reference points per call (one progress step)
+MAX_HEIGHT = 256  # the reference's resampling threshold, as envmap_radiance's default
+
+
+# ----------------------------------------------------------------------------- materials
+def parse_index(text, option: str = "--eta-film"):
+    """A number ("1.3"), a complex number ("2.0+0.5j", also "…i"), a bundled material name
+    (`MATERIALS`) or a refractiveindex.info YAML / CSV file → a float, complex or index
+    model. A bad value is a `ValueError` naming the option and the bundled names."""
+    s = str(text).strip()
+    try:
+        return float(s)
+    except ValueError:
+        pass
+    try:
+        c = complex(s.replace(" ", "").replace("i", "j"))
+        return c.real if c.imag == 0 else c
+    except ValueError:
+        pass
+    try:
+        return refractive_index(s)
+    except (ValueError, TypeError, OSError) as e:
+        why = str(e).splitlines()[0] if Path(s).is_file() else "no such material or file"
+        raise ValueError(f"{option} {s!r}: {why}; expected a number, a complex number "
+                         f"(2.0+0.5j), a bundled material ({', '.join(MATERIALS)}) or a "
+                         f".yml/.yaml/.csv index file") from None
+
+
+def parse_layers(text: str) -> list[tuple[Any, float]]:
+    """"SiO2:250,Si3N4:80" → [(index, 250.0), (index, 80.0)], layer 0 facing the air."""
+    layers = []
+    for part in str(text).split(","):
+        name, sep, d = part.strip().rpartition(":")
+        if not sep or not name:
+            raise ValueError(f"--layers {text!r}: expected MATERIAL:THICKNESS_NM[,…], e.g. "
+                             f"\"SiO2:250,Si3N4:80\"; got {part.strip()!r}")
+        try:
+            thickness = float(d)
+        except ValueError:
+            raise ValueError(f"--layers {text!r}: thickness {d!r} is not a number (nm)") from None
+        if not (math.isfinite(thickness) and thickness >= 0):
+            raise ValueError(f"--layers {text!r}: thickness must be ≥ 0 nm, got {d}")
+        layers.append((parse_index(name, "--layers"), thickness))
+    return layers
+
+
+def make_material(thickness=600.0, eta_film=1.2, eta_base=2.0, *, layers=None, eta_outer=1.0):
+    """A `Film` (one layer) or a `Stack` (`layers` with two or more) from parsed values.
+
+    A complex base n + iκ becomes `Film(…, n, κ)`; a complex film index or an index model
+    anywhere makes the film dispersive (the exact methods' stack code, SPEC §12).
+    """
+    if layers is not None and len(layers) > 1:
+        return Stack([d for _, d in layers], tuple(e for e, _ in layers), eta_base, eta_outer)
+    if layers is not None:
+        eta_film, thickness = layers[0]
+    if isinstance(eta_film, complex):
+        eta_film = refractive_index(eta_film)
+    models = any(is_index_model(e) for e in (eta_film, eta_base, eta_outer))
+    if isinstance(eta_base, complex) and not models:
+        return Film(float(thickness), float(eta_film), eta_base.real, eta_base.imag,
+                    float(eta_outer))
+    if models and not is_index_model(eta_base) and isinstance(eta_base, complex):
+        eta_base = refractive_index(eta_base)
+    return Film(float(thickness), eta_film, eta_base, 0.0, eta_outer)
+
+
+def describe(x) -> str:
+    """A short text of an index or a material (labels, titles, JSON)."""
+    if is_index_model(x):
+        return str(getattr(x, "name", "") or type(x).__name__)
+    if isinstance(x, complex):
+        return f"{x.real:g}{x.imag:+g}i"
+    if isinstance(x, Stack):
+        layers = ", ".join(f"{describe(e)} {float(d):g} nm"
+                           for e, d in zip(x.eta, np.asarray(x.thickness)))
+        return f"air | {layers} | {describe(x.eta_base)}"
+    if isinstance(x, Film):
+        base = (describe(x.eta_base) if is_index_model(x.eta_base) or not float(x.kappa_base)
+                else describe(complex(float(x.eta_base), float(x.kappa_base))))
+        return (f"air | {describe(x.eta_film)} {float(np.asarray(x.thickness)):g} nm | {base}")
+    return f"{float(x):g}"
+
+
+def check_methods(material, methods) -> None:
+    """`core.methods.require` for every method: a method that cannot model `material` is a
+    `ValueError` naming the method and what it lacks."""
+    for m in methods:
+        require(m, dispersive=is_dispersive(material), stack=isinstance(material, Stack))
+
+
+# ----------------------------------------------------------------------------- camera
+def pinhole(resolution: int, azimuth: float, elevation_deg: float,
+            distance: float = DISTANCE, fill: float = FILL):
+    """Eye position (3,) and unit ray directions (R, R, 3) of the pinhole camera (module
+    docstring): the unit sphere at the origin fills `fill` of the frame."""
+    el = np.deg2rad(elevation_deg)
+    toward_eye = np.array([np.cos(el) * np.cos(azimuth), np.cos(el) * np.sin(azimuth),
+                           np.sin(el)])
+    right = np.cross(-toward_eye, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -toward_eye)
+    half = math.tan(math.asin(1.0 / distance)) / fill  # tan of half the field of view
+    c = ((np.arange(resolution) + 0.5) / resolution * 2 - 1) * half
+    x, y = np.meshgrid(c, -c)
+    d = -toward_eye + x[..., None] * right + y[..., None] * up
+    return distance * toward_eye, d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def hit_sphere(eye, dirs):
+    """(mask (R, R), hit points = outward normals (R, R, 3), cos θ = ⟨n, ω_o⟩ (R, R)) of rays
+    from `eye` along `dirs` on the unit sphere; mask: hit at ⟨n, ω_o⟩ ≥ `GRAZING`."""
+    b = dirs @ eye
+    disc = b * b - (eye @ eye - 1.0)
+    t = -b - np.sqrt(np.clip(disc, 0.0, None))
+    p = eye + t[..., None] * dirs
+    p /= np.linalg.norm(p, axis=-1, keepdims=True)
+    cos = -np.sum(p * dirs, -1)
+    return (disc > 0) & (cos >= GRAZING), p, np.clip(cos, 0.0, 1.0)
+
+
+# ----------------------------------------------------------------------------- colour
+def rgb_to_band_matrix(observer: str = DEFAULT_OBSERVER) -> np.ndarray:
+    """M (J, 3), M_jk = Σ_i W_ij B_k(λ_i) = ∫ S_j B_k dλ: the bands of the uplifted RGB."""
+    obs = get_observer(observer)
+    b = basis_on(tuple(float(x) for x in obs.wavelengths))
+    return np.asarray(obs.weights, float).T @ b
+
+
+def bands_of_rgb(rgb, observer: str = DEFAULT_OBSERVER) -> np.ndarray:
+    """Band values (…, J) of linear-RGB radiance (…, 3) seen in a perfect mirror (SPEC §9)."""
+    return np.asarray(rgb, float) @ rgb_to_band_matrix(observer).T
+
+
+def bands_to_linear_srgb(values, observer: str = DEFAULT_OBSERVER) -> np.ndarray:
+    """Linear sRGB (Rec. 709 primaries, D65; unclipped, no transfer function) of band values:
+    `colorimetry.xyz_to_srgb`'s conversion without its encoding and clipping (the EXR)."""
+    import colour
+
+    return np.asarray(colour.XYZ_to_sRGB(bands_to_xyz(values, observer),
+                                         illuminant=white_xy(observer),
+                                         chromatic_adaptation_transform="CAT02",
+                                         apply_cctf_encoding=False), float)
+
+
+def exposure_of(values, observer: str) -> float:
+    """The display exposure that maps the 99th luminance percentile to 0.9 (as `render`)."""
+    y = bands_to_xyz(np.asarray(values).reshape(-1, np.shape(values)[-1]), observer)[:, 1]
+    y = y[np.isfinite(y)]
+    return float(0.9 / max(np.percentile(y, 99) if y.size else 1.0, 1e-12))
+
+
+def write_exr(path, rgb) -> Path:
+    """A float32 RGB OpenEXR file (OpenImageIO), written atomically."""
+    import OpenImageIO as oiio
+
+    a = np.ascontiguousarray(np.nan_to_num(np.asarray(rgb, np.float32)))
+
+    def w(tmp):
+        spec = oiio.ImageSpec(a.shape[1], a.shape[0], 3, "float")
+        spec.attribute("oiio:ColorSpace", "lin_rec709_scene")
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), spec):
+            raise OSError(f"cannot write {path}: {oiio.geterror()}")
+        out.write_image(a)
+        out.close()
+
+    return atomic_write(path, w, suffix=".exr")
+
+
+def write_png(path, srgb) -> Path:
+    """An 8-bit PNG of display sRGB in [0, 1] (OpenImageIO), written atomically."""
+    import OpenImageIO as oiio
+
+    a = np.ascontiguousarray(np.round(np.clip(np.nan_to_num(srgb), 0, 1) * 255).astype(np.uint8))
+
+    def w(tmp):
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), oiio.ImageSpec(a.shape[1], a.shape[0], 3,
+                                                                "uint8")):
+            raise OSError(f"cannot write {path}: {oiio.geterror()}")
+        out.write_image(a)
+        out.close()
+
+    return atomic_write(path, w, suffix=".png")
+
+
+# ----------------------------------------------------------------------------- figures
+PANEL_DPI = 100
+
+
+def panel_inches(resolution: int) -> float:
+    """Side of one composite panel: grows with the resolution (one image pixel per figure
+    pixel above the fixed margin for titles)."""
+    return 1.3 + resolution / PANEL_DPI
+
+
+def plot_panels(path, panels, title: str, resolution: int, *, vmax: float = 20.0) -> tuple:
+    """Panels side by side: (label, image) with an (H, W, 3) sRGB image or an (H, W) ΔE₀₀ map
+    (magma, 0 … `vmax`, one colour bar); the title is wrapped to the figure's width and shrunk
+    until it fits. Returns the PNG's (width, height) in pixels."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    side = panel_inches(resolution)
+    has_bar = any(np.ndim(im) == 2 for _, im in panels)
+    width = side * len(panels) + (0.9 if has_bar else 0.2)
+    fig, axes = plt.subplots(1, len(panels), figsize=(width, side + 0.9), squeeze=False,
+                             layout="constrained")
+    im = None
+    for ax, (label, img) in zip(axes[0], panels):
+        if np.ndim(img) == 2:
+            im = ax.imshow(img, cmap="magma", vmin=0, vmax=vmax, interpolation="nearest")
+        else:
+            ax.imshow(img, interpolation="nearest")
+        ax.set_title(label, fontsize=7)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if im is not None:
+        fig.colorbar(im, ax=axes, shrink=0.8, label="CIEDE2000 ΔE vs reference")
+    size = 8.5
+    while True:  # wrap to the width at this size; smaller until the title fits
+        chars = max(20, int(width * 72 / (0.55 * size)))
+        sup = fig.suptitle("\n".join(textwrap.wrap(title, chars)), fontsize=size)
+        fig.canvas.draw()
+        box = sup.get_window_extent()
+        if (box.x0 >= 0 and box.x1 <= fig.bbox.x1) or size <= 5:
+            break
+        size -= 0.5
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=PANEL_DPI, format="png"))
+    out = tuple(int(round(v)) for v in fig.get_size_inches() * PANEL_DPI)
+    plt.close(fig)
+    return out
+
+
+# ----------------------------------------------------------------------------- scenes
+@dataclass(frozen=True)
+class SceneConfig:
+    """What `render_scene` renders: scene, material (sphere), map, camera, display."""
+
+    scene: str = "sphere"  # "sphere" | "bubble"
+    material: Any = field(default_factory=lambda: Film(600.0, 1.2, 2.0))
+    alpha: float = 0.25
+    envmap: Any = "venice_sunset"
+    resolution: int = 128
+    methods: tuple[str, ...] = ("reference", "improved")
+    exposure: float | None = None
+    observer: str = DEFAULT_OBSERVER
+    elevation_deg: float | None = None  # None: 15° (sphere), 30° (bubble: its thin top shows)
+    ldr_srgb: bool = False
+    # bubble
+    eta_film: Any = "water"
+    thickness_top: float = 30.0
+    thickness_bottom: float = 1200.0
+    orders: int = 1  # inner reflections kept
+
+    def __post_init__(self):
+        if self.scene not in OWN_SCENES:
+            raise ValueError(f"scene must be one of {OWN_SCENES}, got {self.scene!r}")
+        from .render import METHODS
+
+        bad = [m for m in self.methods if m not in METHODS]
+        if bad:
+            raise ValueError(f"unknown method(s) {bad}; expected some of {METHODS}")
+        object.__setattr__(self, "methods", tuple(dict.fromkeys(self.methods)))
+        if self.elevation_deg is None:
+            object.__setattr__(self, "elevation_deg", 15.0 if self.scene == "sphere" else 30.0)
+        if self.scene == "sphere":
+            check_methods(self.material, self.methods)
+
+
+def _frame(cfg: SceneConfig, env):
+    from .render import _view_azimuth
+
+    eye, dirs = pinhole(cfg.resolution, _view_azimuth(env), cfg.elevation_deg)
+    mask, p, cos = hit_sphere(eye, dirs)
+    return eye, dirs, mask, p, cos
+
+
+def _background(env, dirs, observer):
+    from ..shading.envmap import lookup_bilinear
+
+    return bands_of_rgb(np.asarray(lookup_bilinear(env.radiance, dirs)), observer)
+
+
+def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
+    """Band images (R, R, J) per method (NaN off the sphere), mask, background, seconds."""
+    from tqdm.auto import tqdm
+
+    from ..shading.envmap import downsample
+    from ..shading.ibl import envmap_radiance
+    from ..shading.ibl_reference import resample_factor
+    from ..spectral.khr import rec709_to_bands
+    from .render import method_map
+
+    _, dirs, mask, p, _ = _frame(cfg, env)
+    n, view = p[mask], -dirs[mask]
+    cache: dict = {"map": {"env": env}}
+    images, seconds, notes = {}, {}, {}
+    for m in cfg.methods:
+        t0 = time.perf_counter()
+        if METHOD_INFO[m].exact:
+            f = resample_factor(env.shape[0], cfg.alpha, MAX_HEIGHT)
+            src = downsample(env, f) if f > 1 else env
+            if f > 1:
+                notes[m] = (f"map resampled by {f} to {src.shape[0]} × {src.shape[1]} "
+                            f"(solid-angle-exact box filter, texel ≤ α/8)")
+            out = np.zeros((len(n), get_observer(cfg.observer).n_bands))
+            chunk = min(CHUNK, len(n))
+            steps = range(0, len(n), chunk)
+            for s in tqdm(steps, desc=f"render {m}", unit="chunk",
+                          disable=not progress or len(steps) < 2):
+                k = min(chunk, len(n) - s)
+                idx = np.minimum(np.arange(s, s + chunk), len(n) - 1)  # one shape: one compile
+                out[s:s + k] = np.asarray(envmap_radiance(
+                    cfg.material, cfg.alpha, n[idx], view[idx], src, method=m,
+                    observer=cfg.observer, max_height=None))[:k]
+        else:
+            pref = method_map(cache, "map", m, cfg.observer)
+            obs = DEFAULT_OBSERVER if m == "khr" else cfg.observer
+            out = np.asarray(envmap_radiance(cfg.material, cfg.alpha, n, view, pref, method=m,
+                                             observer=obs))
+            if m == "khr":
+                out = rec709_to_bands(out, cfg.observer)
+        seconds[m] = time.perf_counter() - t0
+        img = np.full(mask.shape + (out.shape[-1],), np.nan)
+        img[mask] = out
+        images[m] = img
+    return images, mask, _background(env, dirs, cfg.observer), seconds, notes
+
+
+def bubble_thickness(z, top: float = 30.0, bottom: float = 1200.0):
+    """d = top + (bottom − top)·√(ψ/π), ψ = arccos z the polar angle from the top pole (nm)."""
+    psi = np.arccos(np.clip(z, -1.0, 1.0))
+    return top + (bottom - top) * np.sqrt(psi / np.pi)
+
+
+def bubble_paths(p, dirs, cos, orders: int = 1):
+    """The events of each pixel's path (module docstring): the wall points [p₁, p₂, …,
+    p_{orders+2}] and the directions [ω_r, ω, ω⁽¹⁾, …, ω⁽ᴹ⁾] the map is read in."""
+    points, out_dirs = [p], [dirs + 2 * cos[..., None] * p]  # ω_r = ω − 2⟨ω, n⟩ n
+    q, w = p, dirs
+    out_dirs.append(w)
+    for m in range(orders + 1):
+        q = q + 2 * cos[..., None] * w  # the chord to the next wall point
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        points.append(q)
+        if m < orders:
+            w = w - 2 * np.sum(w * q, -1, keepdims=True) * q  # inner mirror reflection
+            out_dirs.append(w)
+    return points, out_dirs
+
+
+def bubble_factors(thicknesses, cos, eta_film="water", observer: str = DEFAULT_OBSERVER):
+    """Spectral factors F (…, I) at the observer's wavelengths of the bubble's terms:
+    [R(d₁), T(d₁)T(d₂), T(d₁)R(d₂)T(d₃), …] (s and p carried apart, then averaged), for the
+    wall thicknesses `thicknesses` [d₁, d₂, …] (…) and cos θ (…)."""
+    import jax.numpy as jnp
+
+    from ..optics.stack import stack_reflectance, stack_transmittance
+
+    lam = jnp.asarray(get_observer(observer).wavelengths, float)
+    eta = refractive_index(eta_film) if isinstance(eta_film, str) else eta_film
+    c = jnp.asarray(cos, float)[..., None]
+
+    def rt(d, pol):
+        st = Stack(jnp.asarray(d, float)[..., None, None], (eta,), 1.0)
+        return (np.asarray(stack_reflectance(st, c, lam, pol)),
+                np.asarray(stack_transmittance(st, c, lam, pol)))
+
+    out = None
+    for pol in ("s", "p"):
+        r, t = zip(*(rt(d, pol) for d in thicknesses))
+        terms = [r[0], t[0] * t[1]]
+        inner = t[0]
+        for m in range(1, len(thicknesses) - 1):
+            inner = inner * r[m]
+            terms.append(inner * t[m + 1])
+        out = terms if out is None else [0.5 * (a + b) for a, b in zip(out, terms)]
+    return out
+
+
+def shade_bubble(cfg: SceneConfig, env, progress: bool = True):
+    """Band image (R, R, J) of the bubble (NaN off it), mask, background, thickness map."""
+    from ..shading.envmap import lookup_bilinear
+
+    _, dirs, mask, p, cos = _frame(cfg, env)
+    pts, ds, c = p[mask], dirs[mask], cos[mask]
+    points, read = bubble_paths(pts, ds, c, cfg.orders)
+    thick = [bubble_thickness(q[..., 2], cfg.thickness_top, cfg.thickness_bottom)
+             for q in points]
+    factors = bubble_factors(thick, c, cfg.eta_film, cfg.observer)
+    obs = get_observer(cfg.observer)
+    b = basis_on(tuple(float(x) for x in obs.wavelengths))  # (I, K)
+    w = np.asarray(obs.weights, float)  # (I, J)
+    out = 0.0
+    for f, omega in zip(factors, read):
+        rgb = np.asarray(lookup_bilinear(env.radiance, omega))  # (P, K)
+        out = out + np.einsum("pi,ij,ik,pk->pj", f, w, b, rgb, optimize=True)
+    img = np.full(mask.shape + (w.shape[1],), np.nan)
+    img[mask] = out
+    dmap = np.full(mask.shape, np.nan)
+    dmap[mask] = thick[0]
+    return img, mask, _background(env, dirs, cfg.observer), dmap
+
+
+def default_out_dir() -> Path:
+    """A new folder in the current directory, render-YYYYmmdd-HHMMSS (never `figures/`)."""
+    return Path(time.strftime("render-%Y%m%d-%H%M%S"))
+
+
+def _full(img, background, mask):
+    full = np.array(background)
+    full[mask] = img[mask]
+    return full
+
+
+def render_scene(cfg: SceneConfig, out_dir=None, progress: bool = True) -> dict:
+    """Render `cfg` and write, into `out_dir` (default `default_out_dir()`): per image
+    `<name>.exr` (linear sRGB, unexposed, map behind) and `<name>.png` (display sRGB at the
+    exposure); per non-reference method `<name>_dE2000.png` (ΔE₀₀ map with its colour bar);
+    `composite.png`, `render.npz` ((R, R, J) band images, NaN off the sphere, `mask`,
+    `background`) and `render.json` (settings, seconds, ΔE₀₀ mean/p95/max). Returns the
+    summary, with the written paths under "files"."""
+    from ..shading.envmap import load_envmap
+    from .render import map_label
+
+    out = Path(out_dir) if out_dir is not None else default_out_dir()
+    t_all = time.perf_counter()
+    env = load_envmap(cfg.envmap, ldr_srgb=cfg.ldr_srgb)
+    obs = cfg.observer
+    notes: dict = {}
+    if cfg.scene == "sphere":
+        images, mask, background, seconds, notes = shade_sphere(cfg, env, progress)
+        what = describe(cfg.material)
+        title = f"{what}, GGX α = {cfg.alpha:g} under {map_label(cfg.envmap)}, {cfg.resolution} px"
+        extra = {}
+    else:
+        t0 = time.perf_counter()
+        img, mask, background, dmap = shade_bubble(cfg, env, progress)
+        seconds = {"bubble": time.perf_counter() - t0}
+        images = {"bubble": img}
+        eta = cfg.eta_film if isinstance(cfg.eta_film, str) else describe(cfg.eta_film)
+        what = (f"soap bubble: air | {eta} | air, d = {cfg.thickness_top:g} + "
+                f"{cfg.thickness_bottom - cfg.thickness_top:g}·√(ψ/π) nm, mirror, "
+                f"{cfg.orders} inner reflection(s)")
+        title = f"{what} under {map_label(cfg.envmap)}, {cfg.resolution} px"
+        extra = {"thickness": dmap}
+    first = "reference" if "reference" in images else next(iter(images))
+    exposure = cfg.exposure if cfg.exposure is not None else exposure_of(
+        _full(images[first], background, mask) if cfg.scene == "bubble" else images[first][mask],
+        obs)
+    files, panels, errors = [], [], {}
+    for m, img in images.items():
+        full = _full(img, background, mask)
+        files.append(write_exr(out / f"{m}.exr", bands_to_linear_srgb(full, obs)))
+        srgb = bands_to_srgb(full * exposure, obs)
+        files.append(write_png(out / f"{m}.png", srgb))
+        panels.append((f"{m}\n{int(mask.sum()) / seconds[m]:,.0f} points/s", srgb))
+    de_maps = {}
+    if "reference" in images:
+        ref = images["reference"][mask] * exposure
+        for m in images:
+            if m == "reference":
+                continue
+            de = np.full(mask.shape, np.nan)
+            de[mask] = delta_e2000(images[m][mask] * exposure, ref, obs)
+            de_maps[m] = de
+            errors[m] = {"mean": float(np.nanmean(de)), "p95": float(np.nanpercentile(de, 95)),
+                         "max": float(np.nanmax(de))}
+            files.append(out / f"{m}_dE2000.png")
+            plot_panels(files[-1], [(f"ΔE₀₀ {m}: mean {errors[m]['mean']:.2f}, "
+                                     f"p95 {errors[m]['p95']:.2f}", de)],
+                        f"CIEDE2000 of {m} against the reference", cfg.resolution)
+    for m, de in de_maps.items():
+        panels.append((f"ΔE₀₀ {m}\nmean {errors[m]['mean']:.2f}, p95 {errors[m]['p95']:.2f}",
+                       de))
+    if cfg.scene == "bubble":
+        import matplotlib
+
+        d = extra["thickness"]
+        cmap = matplotlib.colormaps["viridis"]
+        lo, hi = np.nanmin(d), np.nanmax(d)
+        dimg = np.where(mask[..., None], cmap((d - lo) / max(hi - lo, 1e-9))[..., :3], 1.0)
+        panels.append((f"film thickness\n{lo:.0f}–{hi:.0f} nm", dimg))
+    files.append(out / "composite.png")
+    size = plot_panels(files[-1], panels, title, cfg.resolution)
+    arrays = {"mask": mask, "background": background, **images, **extra}
+    files.append(atomic_write(out / "render.npz", lambda tmp: np.savez_compressed(tmp, **arrays),
+                              suffix=".npz"))
+    summary = {
+        "scene": cfg.scene, "title": title, "config": config_dict(cfg), "envmap": str(cfg.envmap),
+        "envmap_shape": list(env.shape), "resolution": cfg.resolution,
+        "observer": obs, "exposure": exposure, "points": int(mask.sum()),
+        "alpha": cfg.alpha if cfg.scene == "sphere" else None,
+        "material": what, "methods": list(images), "seconds": seconds, "notes": notes,
+        "dE2000": errors, "composite_pixels": list(size),
+        "bands": "the observer's bands, unit area (a perfect mirror under a white map is 1)",
+        "exr": "linear sRGB (Rec. 709, D65), unexposed; png: sRGB at the exposure",
+    }
+    summary["total_seconds"] = time.perf_counter() - t_all
+    files.append(out / "render.json")
+    summary["files"] = [str(f) for f in files]
+    write_json(out / "render.json", summary)
+    return summary
+
+
+def format_summary(summary: dict) -> str:
+    """The command's table: seconds, points/s and ΔE₀₀ per method."""
+    lines = [f"{'method':10s} {'seconds':>8s} {'pts/s':>9s} {'ΔE mean':>8s} {'ΔE p95':>8s} "
+             f"{'ΔE max':>8s}"]
+    for m, t in summary["seconds"].items():
+        de = summary["dE2000"].get(m)
+        err = (f"{de['mean']:8.2f} {de['p95']:8.2f} {de['max']:8.2f}" if de
+               else f"{'—':>8s} {'—':>8s} {'—':>8s}")
+        lines.append(f"{m:10s} {t:8.1f} {summary['points'] / t:9.0f} {err}")
+    return "\n".join(lines)
+
+
+def config_dict(cfg: SceneConfig) -> dict:
+    """The settings as JSON-able values."""
+    d = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
+    d["material"] = describe(cfg.material)
+    d["eta_film"] = cfg.eta_film if isinstance(cfg.eta_film, str) else describe(cfg.eta_film)
+    return d

@@ -57,6 +57,10 @@ def _bench(args) -> int:
         from ..studies.colour_table_study import run_colour_table_study
 
         run_colour_table_study(out=args.out, quick=args.quick)
+    if args.suite in ("materials", "all"):
+        from ..studies import materials_study as ms
+
+        ms.run(ms.MaterialsConfig.tiny() if args.quick else ms.MaterialsConfig(), out=args.out)
     return 0
 
 
@@ -230,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default="figures", help="output folder (default: figures)")
     b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "models",
-                                       "colour_table", "all"],
+                                       "colour_table", "materials", "all"],
                    default="core",
                    help="core: error vs run time, peers, specialisation (default); ibl: the "
                         "2560×1440 IBL frame and the real-time options' errors; scaling: the "
@@ -240,7 +244,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "Schlick tint and the film methods against the exact film "
                         "(figures/models.*); colour_table: Kneiphof & Klein 2022's prefiltered "
                         "colour table against filtered, improved and the reference per map "
-                        "(figures/colour_table.*); all: the six")
+                        "(figures/colour_table.*); materials: colour charts of films on "
+                        "silicon, constant vs dispersive Si, the real-time methods on "
+                        "dispersive films (figures/materials.*); all: the seven")
     b.set_defaults(func=_bench)
 
     from ..shading.envmap import SHIPPED

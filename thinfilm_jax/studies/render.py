@@ -68,6 +68,7 @@ from ..brdf.carpaint import PAINTS
 from ..shading.carpaint_ibl import paint_envmap_radiance
 from ..shading.colour_table import colour_table_radiance, prefilter_colour
 from .colour_table_study import PAINT_TABLE
+from .scene import fit_title, panel_inches
 
 SCENES = ("fig4", "fig3", "varying")  # the default scenes (films)
 ALL_SCENES = SCENES + ("carpaint",)
@@ -357,7 +358,8 @@ def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:
     methods = _methods(results[0], cfg)
     others = [m for m in methods if m != "reference"]
     ncol = len(methods) + (len(others) if "reference" in methods else 0)
-    size = (2.1 * ncol + 1.2, 2.3 * len(results) + 0.7)
+    side = panel_inches(cfg.resolution)  # grows with the resolution (`scene.panel_inches`)
+    size = (side * ncol + 1.2, (side + 0.2) * len(results) + 0.9)
     fig, axes = plt.subplots(len(results), ncol, figsize=size, squeeze=False,
                              layout="constrained")
     im = None
@@ -385,7 +387,7 @@ def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:
             ax.set_yticks([])
     if im is not None:
         fig.colorbar(im, ax=axes, shrink=0.6, label="CIEDE2000 ΔE vs reference")
-    fig.suptitle(title, fontsize=9)
+    fit_title(fig, title, 9.0)  # wrapped to the width, never clipped
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     plt.close(fig)
 

@@ -295,6 +295,21 @@ def panel_inches(resolution: int) -> float:
     return 1.3 + resolution / PANEL_DPI
 
 
+def fit_title(fig, title: str, size: float = 8.5):
+    """`fig.suptitle(title)` wrapped to the figure's width (lines kept where the title has
+    them), its font shrunk until it lies inside the figure."""
+    width = fig.get_size_inches()[0]
+    while True:
+        chars = max(20, int(width * 72 / (0.55 * size)))
+        text = "\n".join(w for line in title.split("\n") for w in textwrap.wrap(line, chars))
+        sup = fig.suptitle(text, fontsize=size)
+        fig.canvas.draw()
+        box = sup.get_window_extent()
+        if (box.x0 >= 0 and box.x1 <= fig.bbox.x1) or size <= 5:
+            return sup
+        size -= 0.5
+
+
 def plot_panels(path, panels, title: str, resolution: int, *, vmax: float = 20.0) -> tuple:
     """Panels side by side: (label, image) with an (H, W, 3) sRGB image or an (H, W) ΔE₀₀ map
     (magma, 0 … `vmax`, one colour bar); the title is wrapped to the figure's width and shrunk
@@ -320,15 +335,7 @@ def plot_panels(path, panels, title: str, resolution: int, *, vmax: float = 20.0
         ax.set_yticks([])
     if im is not None:
         fig.colorbar(im, ax=axes, shrink=0.8, label="CIEDE2000 ΔE vs reference")
-    size = 8.5
-    while True:  # wrap to the width at this size; smaller until the title fits
-        chars = max(20, int(width * 72 / (0.55 * size)))
-        sup = fig.suptitle("\n".join(textwrap.wrap(title, chars)), fontsize=size)
-        fig.canvas.draw()
-        box = sup.get_window_extent()
-        if (box.x0 >= 0 and box.x1 <= fig.bbox.x1) or size <= 5:
-            break
-        size -= 0.5
+    fit_title(fig, title)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=PANEL_DPI, format="png"))
     out = tuple(int(round(v)) for v in fig.get_size_inches() * PANEL_DPI)
     plt.close(fig)

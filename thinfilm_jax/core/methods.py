@@ -13,8 +13,8 @@ Capabilities, per method:
   approximations with a measured error (docs/getting-started/methods.md).
 * ``dispersion``: "exact" (evaluates every index at each of its own wavelengths), "bands"
   (real-time: the indices of a dispersive single film at each band's centroid wavelength,
-  one evaluation per band, docs/how-to/materials.md gives the measured ΔE₀₀) or "" (constant
-  indices only).
+  one evaluation per band; docs/studies/materials.md gives the measured ΔE₀₀ per material)
+  or "" (constant indices only).
 * ``stacks``: models a multi-layer `Stack` (the references exactly; ``ideal`` with the exact
   bands at h = n, tabulated once per homogeneous stack under a map).
 

@@ -149,7 +149,7 @@ def band_film(film: Film, observer=DEFAULT_OBSERVER) -> Film:
     centroids `band_centroids` (fields of shape (J,), band j in entry j). The real-time
     methods' approximation of dispersion (core/methods.py: ``dispersion="bands"``): each band
     sees the film at one wavelength. The film's and outer medium's κ are dropped (K 29 has no
-    absorbing film); the base keeps n + iκ. Measured error: docs/how-to/materials.md."""
+    absorbing film); the base keeps n + iκ. Measured error: docs/studies/materials.md."""
     lam = band_centroids(observer)
 
     def at(x):

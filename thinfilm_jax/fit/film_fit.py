@@ -97,49 +97,96 @@ import numpy as np
 import optimistix as optx
 from jax import Array
 
+from ..brdf.microfacet import patch_quadrature
 from ..core import _validate as V
-from ..optics.airy import polarised_reflectance
 from ..core.film import Film
+from ..core.material import is_dispersive, needs_stack
+from ..core.methods import METHODS as METHOD_INFO
+from ..core.methods import require
+from ..core.stack import Stack
+from ..optics.airy import polarised_reflectance
 from ..optics.fresnel import film_interfaces, safe_div
-from ..spectral.lut import build_shat_lut
+from ..optics.index import index_at
+from ..optics.stack import stack_reflectance_traced
 from ..realtime.options import ModelOptions
 from ..shading.patch import METHODS, patch_one
+from ..spectral.lut import build_shat_lut
+from ..spectral.reflectance import band_centroids, band_film, stack_bands
 from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
-
-from .options import (_PATCH_ONLY, _START_MARGIN, BATCHING, DEFAULT_BOUNDS,
-                          DEFAULT_N_STARTS, FILM_PARAMS, PARAMS, SOLVERS, FitOptions, FitResult)
+from . import params as P
+from .options import (_PATCH_ONLY, _START_MARGIN, BATCHING, DEFAULT_BOUNDS, DEFAULT_N_STARTS,
+                      DEFAULT_N_STARTS_LAYERS, FILM_PARAMS, PARAMS, SOLVERS, FitOptions,
+                      FitResult)
 
 __all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "FitOptions", "FitResult", "SOLVERS", "fit_film",
            "fit_spectrum", "patch_model", "spectrum_model"]
 
 # ----------------------------------------------------------------------------- forward models
-def patch_model(film: Film, theta_o, alpha, *, method: str = "reference",
+def _traced_stack(material) -> Stack:
+    """The one-layer `Stack` of a dispersive `Film` (trace-safe: no value checks)."""
+    return material if isinstance(material, Stack) else Stack.from_film(material)
+
+
+def patch_model(film, theta_o, alpha, *, method: str = "reference",
                 observer: str = DEFAULT_OBSERVER, terms: int = 2, shat: str = "exact", lut=None,
                 quadrature: tuple[int, int] = (16, 16), ndf: str = "ggx",
                 arithmetic: str = "complex") -> Array:
     """L_j at each view angle: `patch_one` vmapped over `theta_o` (n_angles,) → (n_angles, J).
 
     Scalar film fields and α; no validation (jit- and vmap-safe): the fit's forward model.
+    A `Stack` or a dispersive `Film` (SPEC §12) runs what `patch_radiance` runs for it: an
+    exact method, the stack code at each of the observer's wavelengths on
+    `patch_quadrature`'s nodes; "ideal", A(θ_o, α) times the exact bands at cos θ_o; the
+    other real-time methods, a dispersive single film at each band's centroid
+    (`spectral.reflectance.band_film`: band j of the film at λ̄_j). The caller checks the
+    method can model the material (`core.methods.require`).
     """
     options = ModelOptions(terms=terms, shat=shat, ndf=ndf, quadrature=tuple(quadrature),
                            arithmetic=arithmetic)
+    theta_o = jnp.asarray(theta_o)
+    if needs_stack(film) and (METHOD_INFO[method].exact or method == "ideal"):
+        stack = _traced_stack(film)
+
+        def one(t):
+            quad = patch_quadrature(t, alpha, quadrature=tuple(quadrature), ndf=ndf)
+            if method == "ideal":  # A(θ_o, α) · R_j(cos θ_o), as shading.patch
+                return jnp.sum(quad.weight) * stack_bands(stack, jnp.cos(t), observer)
+            rj = stack_bands(stack, quad.cos_hi, observer)  # (nodes, J)
+            return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
+
+        return jax.vmap(one)(theta_o)
+    if needs_stack(film):  # real time: band j sees the film at its centroid
+        bf = band_film(film, observer)
+        n_bands = len(band_centroids(observer))
+        bf = jax.tree.map(lambda v: jnp.broadcast_to(v, (n_bands,)), bf)
+
+        def one(t):
+            out = jax.vmap(lambda f: patch_one(f, t, alpha, method=method, observer=observer,
+                                               options=options, lut=lut))(bf)  # (J, J)
+            return jnp.diagonal(out)
+
+        return jax.vmap(one)(theta_o)
 
     def one(t):
         return patch_one(film, t, alpha, method=method, observer=observer, options=options,
                          lut=lut)
 
-    return jax.vmap(one)(jnp.asarray(theta_o))
+    return jax.vmap(one)(theta_o)
 
 
-def spectrum_model(film: Film, cos_theta, wavelength) -> Array:
-    """Airy R (SPEC §2) on the grid cos θ₁ (n_angles,) × λ (n_wl,) → (n_angles, n_wl).
+def spectrum_model(film, cos_theta, wavelength) -> Array:
+    """Exact R (SPEC §2) on the grid cos θ₁ (n_angles,) × λ (n_wl,) → (n_angles, n_wl).
 
-    Scalar film fields; general (complex) Fresnel path; no validation.
+    A constant `Film`: the Airy formula, general (complex) Fresnel path; a `Stack` or a
+    dispersive `Film`: the stack code (`optics.stack`, every index at each λ). Scalar
+    fields; no validation.
     """
     c = jnp.asarray(cos_theta)[:, None]
+    lam = jnp.asarray(wavelength)[None, :]
+    if needs_stack(film):
+        return stack_reflectance_traced(_traced_stack(film), c, lam)
     ifc = film_interfaces(film, c, arithmetic="complex")
-    return jnp.mean(polarised_reflectance(ifc, film.thickness, jnp.asarray(wavelength)[None, :]),
-                    axis=0)
+    return jnp.mean(polarised_reflectance(ifc, film.thickness, lam), axis=0)
 
 
 # ----------------------------------------------------------------------------- parameter map
@@ -153,11 +200,16 @@ def _to_y(x, lo, hi):
 
 
 class _Spec(NamedTuple):
-    """The free parameters: names and indices into PARAMS (static), boxes lo, hi (p,) (host
-    arrays, passed to the jitted solve as traced arrays: new bounds never recompile)."""
+    """The free parameters: names, the static `params.ParamMap` that puts them into the
+    (material, α) pytree, which of them are layer thicknesses (position in `free`, layer)
+    and where "eta_film" of a `Film` is (the d–η₂ ridge moves), and their boxes lo, hi (p,)
+    (host arrays, passed to the jitted solve as traced arrays: new bounds never
+    recompile)."""
 
     free: tuple
-    index: tuple
+    pmap: P.ParamMap
+    thick: tuple
+    eta_k: int | None
     lo: object
     hi: object
 
@@ -165,28 +217,19 @@ class _Spec(NamedTuple):
         """Physical values of the free parameters from the unconstrained y (p,)."""
         return _to_x(y, jnp.asarray(self.lo, y.dtype), jnp.asarray(self.hi, y.dtype))
 
-    def with_free(self, x_free, base_x):
-        """The six physical parameters (a tuple of scalars), free ones from `x_free`.
+    def with_free(self, x_free, base):
+        """(material, α) with the free parameters from `x_free` and the rest from the leaves
+        `base` (`params.ParamMap.rebuild`: element by element, so that derivatives with
+        respect to the free parameters never flow through the fixed ones: a jvp through the
+        patch model then skips e.g. the α-dependence of the quadrature when α is fixed)."""
+        return self.pmap.rebuild(x_free, base)
 
-        Built field by field (no scatter), so that derivatives with respect to the free
-        parameters never flow through the fixed ones: a jvp through the patch model then
-        skips e.g. the α-dependence of the quadrature when α is fixed.
-        """
-        out = [base_x[i] for i in range(len(PARAMS))]
-        for k, i in enumerate(self.index):
-            out[i] = x_free[k]
-        return tuple(out)
-
-    def x_full(self, y, base_x):
-        """The six physical parameters with the free ones mapped from y."""
-        return self.with_free(self.x_free(y), base_x)
+    def x_full(self, y, base):
+        """(material, α) with the free parameters mapped from y."""
+        return self.with_free(self.x_free(y), base)
 
     def y_of(self, x_free):
         return _to_y(x_free, jnp.asarray(self.lo, x_free.dtype), jnp.asarray(self.hi, x_free.dtype))
-
-
-def _split(x):
-    return Film(*(x[i] for i in range(5))), x[5]
 
 
 # ----------------------------------------------------------------------------- shared solve
@@ -204,11 +247,24 @@ def _batch(fn, xs, batching):
     return jax.vmap(fn)(xs) if batching == "vmap" else jax.lax.map(fn, xs)
 
 
-def _screen(res_screen, y_starts, n_cols, n_solves, args, batching):
+def _local_min(g):
+    """True where g (rows, *grid) is ≤ its neighbours along every grid axis (not axis 0)."""
+    ok = jnp.ones(g.shape, bool)
+    for ax in range(1, g.ndim):
+        n = g.shape[ax]
+        inf = jnp.full(g.shape[:ax] + (1,) + g.shape[ax + 1:], jnp.inf, g.dtype)
+        left = jnp.concatenate([inf, jax.lax.slice_in_dim(g, 0, n - 1, axis=ax)], axis=ax)
+        right = jnp.concatenate([jax.lax.slice_in_dim(g, 1, n, axis=ax), inf], axis=ax)
+        ok = ok & (g <= left) & (g <= right)
+    return ok
+
+
+def _screen(res_screen, y_starts, grid, n_solves, args, batching):
     """Loss at every start (one model evaluation each, no gradient) and the `n_solves` most
-    promising starts: local minima along each thickness row of the grid (rows of `n_cols`
-    thicknesses, one per screened η₂), lowest first (the initial guess, last in `y_starts`,
-    always counts as a candidate).
+    promising starts: local minima of each row of the thickness grid (a row: the `grid`
+    thicknesses, a product grid when several layers are free, at one screened η₂; a
+    minimum: no higher than its neighbours along every thickness axis), lowest first (the
+    initial guess, last in `y_starts`, always counts as a candidate).
 
     Candidates are ranked by the loss *profiled over a brightness gain*,
     min_g ½|g m − o|² with g ∈ [0.5, 2] (closed form): the starts' α and η₂ are guesses that
@@ -228,11 +284,9 @@ def _screen(res_screen, y_starts, n_cols, n_solves, args, batching):
 
     losses, profiled = _batch(losses_at, y_starts, batching)
     safe = jnp.where(jnp.isnan(profiled), jnp.inf, profiled)
+    n_cols = int(np.prod(grid))
+    row_min = _local_min(safe[:-1].reshape(-1, *grid)).reshape(-1, n_cols)
     grid = safe[:-1].reshape(-1, n_cols)
-    inf = jnp.full((grid.shape[0], 1), jnp.inf, grid.dtype)
-    left = jnp.concatenate([inf, grid[:, :-1]], axis=1)
-    right = jnp.concatenate([grid[:, 1:], inf], axis=1)
-    row_min = (grid <= left) & (grid <= right)
     is_min = jnp.concatenate([row_min.reshape(-1), jnp.ones((1,), bool)])
     # rank of each local minimum within its row: the best minimum of every row comes
     # first, then the second best of every row, ... (a wrong η₂ row cannot crowd out the
@@ -272,7 +326,7 @@ def _pipeline(res_start, res_final, y_starts, args, cfg, orders=None, distinct=N
         return _loss(res_final, y, a)
 
     if y_starts.shape[0] > 1:
-        cand, start_loss = _screen(res_start, y_starts, cfg.n_cols, cfg.n_solves, a,
+        cand, start_loss = _screen(res_start, y_starts, cfg.grid, cfg.n_solves, a,
                                    cfg.batching)
 
         def short(y0):
@@ -346,24 +400,29 @@ def _best_distinct(ys, losses, m, distinct):
     return order[jnp.stack(pos)], jnp.stack(valid)
 
 
-def _orders_fn(spec, x0, cos_outer, lam, n_orders):
-    """`orders(y)` for `_pipeline`: starting points ±1 … ±n_orders fringe orders from y,
-    then, when η₂ is free, moves along the d–η₂ ridge.
+def _real_index(eta, lam, dtype):
+    """Re n of index `eta` (a number or a model) at the wavelength `lam` (nm), in `dtype`."""
+    return jnp.real(index_at(eta, lam)).astype(dtype)
 
-    One order of the film's interference is a change of the optical path D = 2 η₂ d cos θ₂
-    by one (mean) wavelength λ̄, i.e. Δd = λ̄ / (2 η₂ ⟨cos θ₂⟩) at the current η₂ (cos θ₂ by
-    Snell from the views' cos θ₁, averaged over them). The order moves change only the
-    thickness. The ridge moves (η₂ free) set η₂' = η₂ · (1 ± 0.08), (1 ± 0.16) and the
-    thickness that keeps the optical thickness η₂ d, and that ± one order: the data fix η₂ d
-    far better than η₂ (a wrong η₂ at the right η₂ d fits nearly as well: `studies.coverage`, film
-    d = 1090 nm, η₂ = 1.31 fitted as 1163 nm, 1.23 from four views), and the short solves
-    from one (d, η₂) pair do not cross the barriers between such minima. None when
-    thickness is not free.
+
+def _orders_fn(spec, base, cos_outer, lam, n_orders):
+    """`orders(y)` for `_pipeline`: starting points ±1 … ±n_orders fringe orders from y in
+    each free layer thickness (one layer at a time), then, when η₂ of a `Film` is free,
+    moves along the d–η₂ ridge.
+
+    One order of layer i's interference is a change of its optical path D = 2 n_i d_i cos θ_i
+    by one (mean) wavelength λ̄, i.e. Δd_i = λ̄ / (2 n_i ⟨cos θ_i⟩) at the current n_i (Re of
+    the layer's index at λ̄; cos θ_i by Snell from the views' cos θ₁, averaged over them).
+    The order moves change only that thickness. The ridge moves (η₂ free) set η₂' = η₂ ·
+    (1 ± 0.08), (1 ± 0.16) and the thickness that keeps the optical thickness η₂ d, and that
+    ± one order: the data fix η₂ d far better than η₂ (a wrong η₂ at the right η₂ d fits
+    nearly as well: `studies.coverage`, film d = 1090 nm, η₂ = 1.31 fitted as 1163 nm, 1.23
+    from four views), and the short solves from one (d, η₂) pair do not cross the barriers
+    between such minima. None when no thickness is free.
     """
-    if "thickness" not in spec.free or n_orders < 1:
+    if not spec.thick or n_orders < 1:
         return None, None
-    k = spec.free.index("thickness")
-    j = spec.free.index("eta_film") if "eta_film" in spec.free else None
+    j = spec.eta_k
     ks = np.concatenate([-np.arange(n_orders, 0, -1), np.arange(1, n_orders + 1)])
     ridge_eta = np.asarray([0.92, 1.08, 0.84, 1.16])
     ridge_k = np.asarray([0.0, -1.0, 1.0])  # fringe orders added at each ridge η₂'
@@ -372,35 +431,52 @@ def _orders_fn(spec, x0, cos_outer, lam, n_orders):
         s1 = 1.0 - cos_outer * cos_outer
         return jnp.mean(jnp.sqrt(jnp.clip(1.0 - (eta1 / eta2) ** 2 * s1, 1e-4, 1.0)))
 
-    def step(y):
-        x = spec.with_free(spec.x_free(y), x0)
-        return lam / (2.0 * x[1] * cos2(x[4], x[1]))
+    def indices(mat, dtype):  # (Re η_outer, (Re η of each layer)) at λ̄
+        layers = mat.eta if isinstance(mat, Stack) else (mat.eta_film,)
+        return (_real_index(mat.eta_outer, lam, dtype),
+                [_real_index(e, lam, dtype) for e in layers])
+
+    def steps(y):
+        """Δd of one order of each free layer, (len(thick),)."""
+        mat, _ = spec.x_full(y, base)
+        n0, ns = indices(mat, y.dtype)
+        return jnp.stack([lam / (2.0 * ns[i] * cos2(n0, ns[i])) for _, i in spec.thick])
 
     def orders(y):
         xf = spec.x_free(y)
-        lo, hi = jnp.asarray(spec.lo[k], y.dtype), jnp.asarray(spec.hi[k], y.dtype)
-        margin = _START_MARGIN * (hi - lo)
-        d = xf[k] + jnp.asarray(ks, y.dtype) * step(y)
-        xs = jnp.broadcast_to(xf, (ks.size, xf.shape[0])).at[:, k].set(d)
+        st = steps(y)
+        blocks = []
+        for a, (k, _) in enumerate(spec.thick):
+            d = xf[k] + jnp.asarray(ks, y.dtype) * st[a]
+            blocks.append(jnp.broadcast_to(xf, (ks.size, xf.shape[0])).at[:, k].set(d))
+        xs = jnp.concatenate(blocks)
         if j is not None:
-            x = spec.with_free(xf, x0)
+            k = spec.thick[0][0]
+            mat, _ = spec.with_free(xf, base)
+            n0 = _real_index(mat.eta_outer, lam, y.dtype)
             elo, ehi = jnp.asarray(spec.lo[j], y.dtype), jnp.asarray(spec.hi[j], y.dtype)
             e_m = _START_MARGIN * (ehi - elo)
             e2 = jnp.clip(xf[j] * jnp.asarray(ridge_eta, y.dtype), elo + e_m, ehi - e_m)
-            c2 = jax.vmap(lambda e: cos2(x[4], e))(e2)
+            c2 = jax.vmap(lambda e: cos2(n0, e))(e2)
             # the same η₂ d (the path at normal incidence), then ± one order at η₂'
-            d2 = (x[1] * x[0] / e2[None, :] + jnp.asarray(ridge_k, y.dtype)[:, None] * lam
+            d2 = (xf[j] * xf[k] / e2[None, :] + jnp.asarray(ridge_k, y.dtype)[:, None] * lam
                   / (2.0 * e2 * c2)[None, :]).reshape(-1)
             xr = jnp.broadcast_to(xf, (d2.size, xf.shape[0]))
             xr = xr.at[:, k].set(d2).at[:, j].set(jnp.tile(e2, ridge_k.size))
             xs = jnp.concatenate([xs, xr])
-        xs = xs.at[:, k].set(jnp.clip(xs[:, k], lo + margin, hi - margin))
+        for k, _ in spec.thick:
+            lo, hi = jnp.asarray(spec.lo[k], y.dtype), jnp.asarray(spec.hi[k], y.dtype)
+            margin = _START_MARGIN * (hi - lo)
+            xs = xs.at[:, k].set(jnp.clip(xs[:, k], lo + margin, hi - margin))
         return jax.vmap(spec.y_of)(xs)
 
     def distinct(y1, y2):
-        """Different minima: thickness apart by more than a quarter order."""
-        d1, d2 = spec.x_free(y1)[k], spec.x_free(y2)[k]
-        return jnp.abs(d1 - d2) > 0.25 * jnp.minimum(step(y1), step(y2))
+        """Different minima: some free thickness apart by more than a quarter order."""
+        x1, x2 = spec.x_free(y1), spec.x_free(y2)
+        s1, s2 = steps(y1), steps(y2)
+        apart = [jnp.abs(x1[k] - x2[k]) > 0.25 * jnp.minimum(s1[a], s2[a])
+                 for a, (k, _) in enumerate(spec.thick)]
+        return functools.reduce(jnp.logical_or, apart)
 
     return orders, distinct
 
@@ -433,65 +509,129 @@ def _cells(lo, hi, n):
     return lo + (hi - lo) * (np.arange(n) + 0.5) / n
 
 
-def _grid_starts(spec, x0_host, n_starts, n_eta_starts, starts, dtype):
-    """Screening grid: thickness (`n_starts` cell midpoints of its box, or `starts`) × film
-    index (its initial value plus `n_eta_starts` cell midpoints of its box, if it is free),
-    other free parameters at their initial values, and the initial guess itself last.
+def _grid_starts(spec, x_free0, n_starts, n_eta_starts, starts, dtype):
+    """Screening grid: thickness (`n_starts` cell midpoints of its box, or `starts`; with
+    several free layers the product grid of one such axis per layer) × film index (its
+    initial value plus `n_eta_starts` cell midpoints of its box, if "eta_film" of a `Film` is
+    free), other free parameters at their initial values, and the initial guess itself last.
 
-    Returns (y (N, p), x (N, p) physical, n_cols = thicknesses per row)."""
-    x_free0 = np.asarray([float(np.asarray(x0_host[i])) for i in spec.index])
-    if "thickness" not in spec.free or (n_starts <= 1 and starts is None):
+    Returns (y (N, p), x (N, p) physical, grid = the thickness grid's shape per row)."""
+    x_free0 = np.asarray(x_free0, float)
+    if not spec.thick or (n_starts <= 1 and starts is None):
         xs = x_free0[None, :]
-        n_cols = 1
+        grid = (1,)
     else:
-        k = spec.free.index("thickness")
-        lo, hi = float(spec.lo[k]), float(spec.hi[k])
-        if starts is None:
-            d = _cells(lo, hi, n_starts)
-        else:
-            d = np.sort(np.asarray(starts, float).reshape(-1))
-            if d.size == 0 or not (np.all(np.isfinite(d)) and np.all((d >= lo) & (d <= hi))):
-                raise ValueError(f"starts must be finite thicknesses within [{lo}, {hi}] nm")
+        axes = []
+        for k, _ in spec.thick:
+            lo, hi = float(spec.lo[k]), float(spec.hi[k])
+            if starts is None:
+                d = _cells(lo, hi, n_starts)
+            else:
+                d = np.sort(np.asarray(starts, float).reshape(-1))
+                if d.size == 0 or not (np.all(np.isfinite(d))
+                                       and np.all((d >= lo) & (d <= hi))):
+                    raise ValueError(f"starts must be finite thicknesses within [{lo}, {hi}] "
+                                     f"nm")
+            axes.append(d)
+        mesh = [m.reshape(-1) for m in np.meshgrid(*axes, indexing="ij")]
         rows = [x_free0]
-        if "eta_film" in spec.free and n_eta_starts > 0:
-            j = spec.free.index("eta_film")
+        if spec.eta_k is not None and n_eta_starts > 0:
+            j = spec.eta_k
             for e in _cells(float(spec.lo[j]), float(spec.hi[j]), n_eta_starts):
                 rows.append(x_free0.copy())
                 rows[-1][j] = e
-        xs = np.concatenate([np.repeat(r[None, :], d.size, axis=0) for r in rows])
-        xs[:, k] = np.tile(d, len(rows))
+        n_cols = mesh[0].size
+        xs = np.concatenate([np.repeat(r[None, :], n_cols, axis=0) for r in rows])
+        for (k, _), d in zip(spec.thick, mesh):
+            xs[:, k] = np.tile(d, len(rows))
         xs = np.concatenate([xs, x_free0[None, :]])
-        n_cols = d.size
+        grid = tuple(d.size for d in axes)
     xs = jnp.asarray(xs, dtype)
-    return jax.vmap(spec.y_of)(xs), xs, n_cols
+    return jax.vmap(spec.y_of)(xs), xs, grid
 
 
 # ----------------------------------------------------------------------------- validation
-def _check_free(free, allowed):
+def _check_free(free, table, material):
+    """`free` as a tuple of names (as given), each naming one scalar of `table` (aliases:
+    `params.resolve`) and none twice."""
     if isinstance(free, str):
         free = (free,)
     free = tuple(free)
     if not free:
         raise ValueError("free must name at least one parameter")
+    resolved = []
     for k in free:
-        if k not in allowed:
-            raise ValueError(f"unknown free parameter {k!r}; expected names from {list(allowed)}")
-    if len(set(free)) != len(free):
+        r = P.resolve(k, table, material) if isinstance(k, str) else k
+        if r not in table:
+            raise ValueError(f"unknown free parameter {k!r}; expected names from "
+                             f"{P.describe(table)}")
+        resolved.append(r)
+    if len(set(resolved)) != len(resolved):
         raise ValueError(f"free names a parameter twice: {free}")
     return free
 
 
-def _make_spec(free, bounds, x0):
-    """The free parameters' `_Spec`; `bounds` is the full {name: (lo, hi)} dict."""
-    index = tuple(PARAMS.index(k) for k in free)
-    for k, i in zip(free, index):
-        lo, hi = bounds[k]
-        if V.is_concrete(x0[i]):
-            v = float(np.asarray(x0[i]))
-            if not lo <= v <= hi:
-                raise ValueError(f"initial {k} = {v!r} lies outside its bounds [{lo}, {hi}]")
-    return _Spec(free, index, np.asarray([bounds[k][0] for k in free]),
-                 np.asarray([bounds[k][1] for k in free]))
+def _make_spec(free, user_bounds, material, alpha, table):
+    """The free parameters' `_Spec` and their initial values (host floats).
+
+    A free name's box: `user_bounds` under its name (or its alias), else
+    `params.default_box` (`DEFAULT_BOUNDS` for the `Film` fields, "alpha" and every layer
+    thickness; the rules for other scalars there)."""
+    names = [P.resolve(k, table, material) for k in free]
+    for k in user_bounds:
+        if P.is_path_name(k) and P.resolve(k, table, material) not in table:
+            raise ValueError(f"bounds: unknown parameter {k!r} for this material; expected "
+                             f"names from {P.describe(table)}")
+    pmap = P.ParamMap.of(material, [table[n] for n in names])
+    x0 = np.asarray(pmap.host_values(material, alpha), float)
+    lo, hi = [], []
+    for i, (k, n) in enumerate(zip(free, names)):
+        given = [user_bounds[b] for b in (k, n) if b in user_bounds]
+        if not given and n != k and n in ("thickness", "thickness[0]"):
+            given = [user_bounds[b] for b in ("thickness", "thickness[0]") if b in user_bounds]
+        v = float(x0[i])
+        box = given[0] if given else P.default_box(n, v, material, DEFAULT_BOUNDS)
+        if not box[0] <= v <= box[1]:
+            raise ValueError(f"initial {k} = {v!r} lies outside its bounds [{box[0]}, "
+                             f"{box[1]}]")
+        lo.append(box[0])
+        hi.append(box[1])
+    thick = tuple((i, P.layer_of(n, material)) for i, n in enumerate(names)
+                  if P.layer_of(n, material) is not None)
+    eta_k = (names.index("eta_film") if isinstance(material, Film) and "eta_film" in names
+             and thick else None)
+    spec = _Spec(free, pmap, thick, eta_k, np.asarray(lo, float), np.asarray(hi, float))
+    return spec, x0
+
+
+def _check_material(initial, wavelengths):
+    """The checked `initial` material: a constant `Film` (`_check_scalar_film`), a dispersive
+    `Film` (its index models cover `wavelengths`; a complex constant base folded into
+    kappa_base) or a `Stack` (one thickness per layer, no batch axes)."""
+    if isinstance(initial, Film) and not is_dispersive(initial):
+        return _check_scalar_film(initial)
+    if not isinstance(initial, Film | Stack):
+        raise TypeError(f"initial must be a thinfilm_jax.Film or Stack, got "
+                        f"{type(initial).__name__}")
+    checked = V.check_material(initial, "initial", wavelengths)
+    if isinstance(initial, Stack):
+        if np.ndim(checked.thickness) != 1:
+            raise ValueError(f"initial.thickness must hold one thickness per layer, shape "
+                             f"({initial.n_layers},); got shape {np.shape(checked.thickness)}")
+        return checked
+    for k in ("thickness", "kappa_base"):
+        if np.shape(getattr(initial, k)) != ():
+            raise ValueError(f"initial.{k} must be a scalar, got shape "
+                             f"{np.shape(getattr(initial, k))}")
+    film = initial._replace(**{k: jnp.asarray(getattr(initial, k)) for k in FILM_PARAMS
+                               if not callable(getattr(initial, k))})
+    return film if callable(film.eta_base) else film.real_base()
+
+
+def _real_dtype(*xs):
+    """The real floating dtype of arrays `xs` (complex ones count as their real part)."""
+    return jnp.result_type(*(jnp.finfo(jnp.result_type(x)).dtype
+                             if jnp.iscomplexobj(x) else x for x in xs), float)
 
 
 def _static(spec):
@@ -548,11 +688,12 @@ def _mean_wavelength(observer):
     return float(np.mean(np.asarray(obs.wavelengths) @ np.asarray(obs.weights)))
 
 
-def _n_candidates(y_starts, n_cols, n_solves):
-    """n_solves, by default 2 per screened row (≥ 8), at most the number of starts."""
+def _n_candidates(y_starts, grid, n_solves):
+    """n_solves, by default 2 per screened row (≥ 8 per free thickness), at most the number
+    of starts."""
     if n_solves is None:
-        rows = (y_starts.shape[0] - 1) // n_cols
-        n_solves = max(8, 2 * rows + 2)
+        rows = (y_starts.shape[0] - 1) // int(np.prod(grid))
+        n_solves = max(8 * len(grid), 2 * rows + 2)
     return min(int(n_solves), y_starts.shape[0])
 
 
@@ -570,7 +711,7 @@ class _FilmCfg(NamedTuple):
     solver: str
     rtol: float
     atol: float
-    n_cols: int
+    grid: tuple
     n_solves: int
     start_steps: int
     max_steps: int
@@ -581,8 +722,8 @@ class _FilmCfg(NamedTuple):
     wavelength: float
 
 
-def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = ("thickness",),
-             method: str = "reference", sigma=None,
+def fit_film(observed, theta_o, *, alpha, initial: Film | Stack,
+             free: Sequence[str] = ("thickness",), method: str = "reference", sigma=None,
              options: FitOptions | None = None) -> FitResult:
     """Fit film parameters (and α) to patch radiances observed at view angles θ_o (SPEC §8).
 
@@ -594,16 +735,21 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
             ``patch_radiance(film, theta_o, alpha, method=...)``.
         theta_o: view angles (n_angles,), radians in [0, π/2].
         alpha: GGX roughness (the initial guess if "alpha" is free), scalar in (0, 1].
-        initial: `Film` with scalar fields: fixed values and initial guesses (concrete:
+        initial: a `Film` with scalar fields, a `Film` with index models, or a `Stack` (one
+            thickness per layer) (SPEC §12): fixed values and initial guesses (concrete:
             they seed the start grid on the host; `observed` may be traced, so the fit
-            works under `jax.jit`, `jax.vmap` and `jax.grad` with respect to it).
-        free: names of the fitted parameters: `Film` fields and/or "alpha".
+            works under `jax.jit`, `jax.vmap` and `jax.grad` with respect to it). A `Stack`
+            needs an exact method ("reference"); a dispersive `Film` takes the real-time
+            methods too (each band at its centroid), `core.methods.require` says which.
+        free: names of the fitted parameters (`params` module: `Film` fields,
+            ``"thickness[i]"`` of a `Stack`, an index model's ``"eta[1].coefficients[0]"``,
+            ...) and/or "alpha".
         method: forward model, a `patch.METHODS` name (SPEC §7).
         sigma: standard deviations of the observations (broadcast to `observed`).
         options: `FitOptions` (search, solver, quadrature, observer, ...); None = defaults.
 
     Returns:
-        `FitResult`.
+        `FitResult` (``film``: the fitted material, of the type of `initial`).
 
     Example:
         >>> import numpy as np
@@ -614,13 +760,21 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
         >>> round(float(res.film.thickness), 2), bool(res.converged)
         (600.0, True)
     """
-    if not isinstance(initial, Film):
-        raise TypeError(f"initial must be a thinfilm_jax.Film, got {type(initial).__name__}")
-    initial = _check_scalar_film(initial)
-    free = _check_free(free, PARAMS)
+    if not isinstance(initial, Film | Stack):
+        raise TypeError(f"initial must be a thinfilm_jax.Film or Stack, got "
+                        f"{type(initial).__name__}")
     V.check_choice("method", method, METHODS)
     o = _check_options(options, "patch")
     refine_method = None if o.refine_method == method else o.refine_method
+    methods = (method,) if refine_method is None else (method, refine_method)
+    if needs_stack(initial):
+        for m in methods:
+            require(m, dispersive=is_dispersive(initial), stack=isinstance(initial, Stack))
+    exact = any(METHOD_INFO[m].exact or m == "ideal" for m in methods)
+    initial = _check_material(initial, get_observer(o.observer).wavelengths if exact
+                              else band_centroids(o.observer))
+    table = P.scalar_table(initial, with_alpha=True)
+    free = _check_free(free, table, initial)
     observer = o.observer
     quadrature = o.quadrature
     start_quadrature = quadrature if o.start_quadrature is None else o.start_quadrature
@@ -643,34 +797,42 @@ def fit_film(observed, theta_o, *, alpha, initial: Film, free: Sequence[str] = (
     if observed.size <= len(free):
         raise ValueError(f"{observed.size} observations cannot determine {len(free)} free "
                          f"parameters {free}")
-    dtype = jnp.result_type(observed, theta_o, alpha, *initial, float)
-    x0 = jnp.stack([jnp.asarray(v, dtype) for v in (*initial, alpha)])
-    spec = _make_spec(free, o.bounds_dict, [*initial, alpha])
-    n_starts = DEFAULT_N_STARTS["patch"] if o.n_starts is None else o.n_starts
-    y_starts, x_starts, n_cols = _grid_starts(spec, [*initial, alpha], n_starts,
-                                              o.n_eta_starts, o.starts, dtype)
+    dtype = _real_dtype(observed, theta_o, alpha, *jax.tree_util.tree_leaves(initial))
+    base = P.leaves(initial, alpha, dtype)
+    spec, x_free0 = _make_spec(free, dict(o.bounds or ()), initial, alpha, table)
+    n_starts = _default_starts(o.n_starts, "patch", spec)
+    y_starts, x_starts, grid = _grid_starts(spec, x_free0, n_starts, o.n_eta_starts,
+                                            o.starts, dtype)
     w = _weights(sigma, observed.shape, dtype)
     lut = build_shat_lut(observer, dtype=dtype) if o.shat == "lut" else None
     static, box = _static(spec)
     cfg = _FilmCfg(static, method, refine_method, observer, o.terms, o.shat, quadrature,
-                   start_quadrature, o.ndf, o.solver, o.rtol, o.atol, n_cols,
-                   _n_candidates(y_starts, n_cols, o.n_solves), o.start_steps, o.max_steps,
+                   start_quadrature, o.ndf, o.solver, o.rtol, o.atol, grid,
+                   _n_candidates(y_starts, grid, o.n_solves), o.start_steps, o.max_steps,
                    o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
                    _mean_wavelength(observer))
     box = tuple(jnp.asarray(b, dtype) for b in box)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
-        out = _fit_film_jit(observed.astype(dtype), w, theta_o.astype(dtype), x0, y_starts,
+        out = _fit_film_jit(observed.astype(dtype), w, theta_o.astype(dtype), base, y_starts,
                             box, lut, cfg)
     return _result(out, free, x_starts, True)
 
 
+def _default_starts(n_starts, kind, spec):
+    """Thicknesses per free layer of the screen: `n_starts`, else `DEFAULT_N_STARTS` for one
+    free thickness and `DEFAULT_N_STARTS_LAYERS` per layer for several."""
+    if n_starts is not None:
+        return n_starts
+    return (DEFAULT_N_STARTS if len(spec.thick) <= 1 else DEFAULT_N_STARTS_LAYERS)[kind]
+
+
 @functools.partial(jax.jit, static_argnames="cfg")
-def _fit_film_jit(observed, w, theta_o, x0, y_starts, box, lut, cfg: _FilmCfg):
+def _fit_film_jit(observed, w, theta_o, base, y_starts, box, lut, cfg: _FilmCfg):
     spec = cfg.spec._replace(lo=box[0], hi=box[1])
     final_method = cfg.refine_method or cfg.method
 
     def model_x(x, method, quad):
-        film, alpha = _split(x)
+        film, alpha = x
         return patch_model(film, theta_o, alpha, method=method, observer=cfg.observer,
                            terms=cfg.terms, shat=cfg.shat, lut=lut, quadrature=quad,
                            ndf=cfg.ndf, arithmetic="complex")
@@ -678,20 +840,20 @@ def _fit_film_jit(observed, w, theta_o, x0, y_starts, box, lut, cfg: _FilmCfg):
     def residuals(method, quad):
         def fn(y, args):
             obs, ww = args
-            return ((model_x(spec.x_full(y, x0), method, quad) - obs) * ww).reshape(-1)
+            return ((model_x(spec.x_full(y, base), method, quad) - obs) * ww).reshape(-1)
         return fn
 
     def res_x(x_free, args):
         obs, ww = args
-        return ((model_x(spec.with_free(x_free, x0), final_method, cfg.quadrature) - obs)
+        return ((model_x(spec.with_free(x_free, base), final_method, cfg.quadrature) - obs)
                 * ww).reshape(-1)
 
     args = (observed, w)
-    orders, distinct = _orders_fn(spec, x0, jnp.cos(theta_o), cfg.wavelength, cfg.n_orders)
+    orders, distinct = _orders_fn(spec, base, jnp.cos(theta_o), cfg.wavelength, cfg.n_orders)
     out = _pipeline(residuals(cfg.method, cfg.start_quadrature),
                     residuals(final_method, cfg.quadrature), y_starts, args, cfg, orders,
                     distinct)
-    return _finish(out, res_x, spec, x0, args, w, cfg)
+    return _finish(out, res_x, spec, base, args, w, cfg)
 
 
 # ----------------------------------------------------------------------------- fit_spectrum
@@ -700,7 +862,7 @@ class _SpecCfg(NamedTuple):
     solver: str
     rtol: float
     atol: float
-    n_cols: int
+    grid: tuple
     n_solves: int
     start_steps: int
     max_steps: int
@@ -711,23 +873,30 @@ class _SpecCfg(NamedTuple):
     wavelength: float
 
 
-def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film,
+def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
                  free: Sequence[str] = ("thickness",), sigma=None,
                  options: FitOptions | None = None) -> FitResult:
-    """Fit film parameters to reflectance spectra R(θ₁, λ) (SPEC §2; film metrology).
+    """Fit film parameters to reflectance spectra R(θ₁, λ) (SPEC §2, §12; film metrology).
 
-    The model is `spectrum_model` (the exact Airy reflectance, general Fresnel path).
+    The model is `spectrum_model`: the exact Airy reflectance (general Fresnel path) of a
+    constant `Film`, the stack code (every index at each λ) of a `Stack` or a dispersive
+    `Film`.
 
     Args:
         observed: unpolarised reflectance, shape (n_angles, n_wl) (or (n_wl,) for one angle).
         wavelength: λ in nm, shape (n_wl,).
         cos_theta: cos θ₁ of each spectrum, shape (n_angles,) (or scalar), in [0, 1].
-        initial: `Film` with scalar fields (fixed values and initial guesses).
-        free: `Film` field names to fit.
+        initial: a `Film` with scalar fields, a `Film` with index models or a `Stack` (one
+            thickness per layer): fixed values and initial guesses; index models must cover
+            `wavelength`.
+        free: names of the fitted scalars (`params` module): `Film` fields, a `Stack`'s
+            ``"thickness[i]"`` (``"thickness"`` is layer 0), an index model's
+            ``"eta[0].coefficients[0]"``, ...
         sigma: standard deviations of the observations (broadcast to `observed`).
         options: `FitOptions` (search and solver fields; the patch-model fields must keep
-            their defaults). ``n_starts=None`` screens 256 thicknesses: spectral minima are
-            closer together than patch-colour minima, and the model is cheap.
+            their defaults). ``n_starts=None`` screens 256 thicknesses (one free layer) or
+            a 48 × 48 grid (two free layers; `DEFAULT_N_STARTS_LAYERS` per layer): spectral
+            minima are closer together than patch-colour minima, and the model is cheap.
 
     Returns:
         `FitResult` with ``alpha=None``; residuals of shape (n_angles, n_wl).
@@ -742,10 +911,9 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film,
         >>> round(float(res.film.thickness), 2)
         812.0
     """
-    if not isinstance(initial, Film):
-        raise TypeError(f"initial must be a thinfilm_jax.Film, got {type(initial).__name__}")
-    initial = _check_scalar_film(initial)
-    free = _check_free(free, FILM_PARAMS)
+    if not isinstance(initial, Film | Stack):
+        raise TypeError(f"initial must be a thinfilm_jax.Film or Stack, got "
+                        f"{type(initial).__name__}")
     o = _check_options(options, "spectrum")
     batching = _check_batching(o.batching)
     wavelength = jnp.asarray(V.as_array("wavelength", wavelength))
@@ -754,6 +922,9 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film,
         raise ValueError(f"wavelength and cos_theta must be 1-D; got shapes {wavelength.shape}, "
                          f"{cos_theta.shape}")
     wavelength = V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")
+    initial = _check_material(initial, wavelength if V.is_concrete(wavelength) else None)
+    table = P.scalar_table(initial)
+    free = _check_free(free, table, initial)
     cos_theta = V.check_cos_theta(cos_theta)
     observed = jnp.asarray(V.as_array("observed", observed))
     if observed.ndim == 1:
@@ -766,51 +937,51 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film,
     if observed.size <= len(free):
         raise ValueError(f"{observed.size} observations cannot determine {len(free)} free "
                          f"parameters {free}")
-    dtype = jnp.result_type(observed, wavelength, cos_theta, *initial, float)
-    x0 = jnp.stack([jnp.asarray(v, dtype) for v in (*initial, 1.0)])
-    spec = _make_spec(free, o.bounds_dict, [*initial, 1.0])
-    n_starts = DEFAULT_N_STARTS["spectrum"] if o.n_starts is None else o.n_starts
-    y_starts, x_starts, n_cols = _grid_starts(spec, [*initial, 1.0], n_starts,
-                                              o.n_eta_starts, o.starts, dtype)
+    dtype = _real_dtype(observed, wavelength, cos_theta, *jax.tree_util.tree_leaves(initial))
+    base = P.leaves(initial, None, dtype)
+    spec, x_free0 = _make_spec(free, dict(o.bounds or ()), initial, None, table)
+    n_starts = _default_starts(o.n_starts, "spectrum", spec)
+    y_starts, x_starts, grid = _grid_starts(spec, x_free0, n_starts, o.n_eta_starts,
+                                            o.starts, dtype)
     w = _weights(sigma, shape, dtype)
     static, box = _static(spec)
-    cfg = _SpecCfg(static, o.solver, o.rtol, o.atol, n_cols,
-                   _n_candidates(y_starts, n_cols, o.n_solves), o.start_steps, o.max_steps,
+    cfg = _SpecCfg(static, o.solver, o.rtol, o.atol, grid,
+                   _n_candidates(y_starts, grid, o.n_solves), o.start_steps, o.max_steps,
                    o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
                    float(np.mean(wavelength)) if V.is_concrete(wavelength) else 550.0)
     box = tuple(jnp.asarray(b, dtype) for b in box)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
         out = _fit_spectrum_jit(observed.astype(dtype), w, wavelength.astype(dtype),
-                                cos_theta.astype(dtype), x0, y_starts, box, cfg)
+                                cos_theta.astype(dtype), base, y_starts, box, cfg)
     return _result(out, free, x_starts, False)
 
 
 @functools.partial(jax.jit, static_argnames="cfg")
-def _fit_spectrum_jit(observed, w, wavelength, cos_theta, x0, y_starts, box, cfg: _SpecCfg):
+def _fit_spectrum_jit(observed, w, wavelength, cos_theta, base, y_starts, box, cfg: _SpecCfg):
     spec = cfg.spec._replace(lo=box[0], hi=box[1])
 
     def res(y, args):
         obs, ww = args
-        return ((spectrum_model(_split(spec.x_full(y, x0))[0], cos_theta, wavelength) - obs)
+        return ((spectrum_model(spec.x_full(y, base)[0], cos_theta, wavelength) - obs)
                 * ww).reshape(-1)
 
     def res_x(x_free, args):
         obs, ww = args
-        film = _split(spec.with_free(x_free, x0))[0]
+        film = spec.with_free(x_free, base)[0]
         return ((spectrum_model(film, cos_theta, wavelength) - obs) * ww).reshape(-1)
 
     args = (observed, w)
-    orders, distinct = _orders_fn(spec, x0, cos_theta, cfg.wavelength, cfg.n_orders)
+    orders, distinct = _orders_fn(spec, base, cos_theta, cfg.wavelength, cfg.n_orders)
     out = _pipeline(res, res, y_starts, args, cfg, orders, distinct)
-    return _finish(out, res_x, spec, x0, args, w, cfg)
+    return _finish(out, res_x, spec, base, args, w, cfg)
 
 
-def _finish(out, res_x, spec, x0, args, w, cfg):
+def _finish(out, res_x, spec, base, args, w, cfg):
     """Fitted parameters, loss, residuals, standard errors and runner-ups (inside jit)."""
     sol, start_loss, alt_y, alt_loss = out
     observed = args[0]
     x_free = spec.x_free(sol.value)
-    x = jnp.stack(spec.with_free(x_free, x0))
+    fitted = spec.with_free(x_free, base)
     r = res_x(x_free, args)
     loss = 0.5 * jnp.sum(r * r)
     stderr, corr, s2 = _covariance(res_x, jax.lax.stop_gradient(x_free),
@@ -822,13 +993,12 @@ def _finish(out, res_x, spec, x0, args, w, cfg):
     dchi2 = jnp.where(jnp.isfinite(alt_loss), 2.0 * gap / jnp.where(s2 > 0, s2, 1.0), jnp.inf)
     dchi2 = jnp.where((s2 > 0) | ~jnp.isfinite(alt_loss), dchi2,
                       jnp.where(gap > 0, jnp.inf, 0.0))
-    return (sol, x, loss, r.reshape(observed.shape) / w, stderr, corr, start_loss, alt_x,
+    return (sol, fitted, loss, r.reshape(observed.shape) / w, stderr, corr, start_loss, alt_x,
             alt_loss, dchi2)
 
 
 def _result(out, free, x_starts, has_alpha):
-    sol, x, loss, resid, stderr, corr, start_loss, alt_x, alt_loss, dchi2 = out
-    film, alpha = _split(x)
+    sol, (film, alpha), loss, resid, stderr, corr, start_loss, alt_x, alt_loss, dchi2 = out
     return FitResult(film, alpha if has_alpha else None, loss,
                      sol.result == optx.RESULTS.successful, sol.stats["num_steps"],
                      dict(zip(free, stderr)), corr, free, resid, x_starts, start_loss, sol,

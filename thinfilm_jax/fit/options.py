@@ -18,9 +18,11 @@ from jax import Array
 
 from ..core import _validate as V
 from ..core.film import Film
+from ..core.stack import Stack
 from ..realtime.filtered import SHAT_SOURCES
 from ..shading.patch import METHODS
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
+from . import params as P
 
 __all__ = ["AMBIGUOUS_DCHI2", "DEFAULT_BOUNDS", "FILM_PARAMS", "PARAMS", "SOLVERS",
            "FitOptions", "FitResult"]
@@ -29,7 +31,9 @@ FILM_PARAMS = Film._fields  # ("thickness", "eta_film", "eta_base", "kappa_base"
 PARAMS = (*FILM_PARAMS, "alpha")
 
 #: Boxes of the free parameters (physical units: nm, dimensionless). α's lower end keeps the
-#: GGX lobe resolvable by the quadrature.
+#: GGX lobe resolvable by the quadrature. A `Stack`'s ``"thickness[i]"`` takes the box of
+#: "thickness"; other scalars of a material (index-model parameters, a `Stack`'s constant
+#: indices) get `params.default_box`.
 DEFAULT_BOUNDS = {
     "thickness": (0.0, 2000.0),
     "eta_film": (1.0, 4.0),
@@ -59,6 +63,9 @@ _START_MARGIN = 5e-3  # starting points at least this fraction of the box inside
 #: Default number of screened thicknesses per problem (`FitOptions.n_starts` = None):
 #: spectral minima are closer together than patch-colour minima, and the model is cheap.
 DEFAULT_N_STARTS = {"patch": 64, "spectrum": 256}
+#: ... and per free layer when several layer thicknesses are free (a product grid: 48 × 48
+#: for two layers of a spectrum fit; measured in docs/how-to/fit-film.md).
+DEFAULT_N_STARTS_LAYERS = {"patch": 24, "spectrum": 48}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,12 +82,16 @@ class FitOptions:
         solver: a `SOLVERS` name (Levenberg–Marquardt by default).
         n_starts: thickness guesses spread over the thickness box (midpoints of equal
             cells), screened by their loss; 1 = the initial guess only; None = the
-            problem's default (`DEFAULT_N_STARTS`: 64 for patches, 256 for spectra).
+            problem's default (`DEFAULT_N_STARTS`: 64 for patches, 256 for spectra). With
+            several free layer thicknesses (a `Stack`) this many per layer, on their product
+            grid (default `DEFAULT_N_STARTS_LAYERS`: 24 per layer for patches, 48 for
+            spectra).
         n_eta_starts: if "eta_film" is free, the thickness grid is screened at the
             initial η₂ and at this many η₂ values spread over its box (0: initial η₂ only).
         n_solves: short solves from the best-screened guesses (None: 2 per screened η₂
-            row, at least 8).
-        starts: explicit thickness guesses (nm) instead of the spread.
+            row, at least 8 per free layer thickness).
+        starts: explicit thickness guesses (nm) instead of the spread (the same for every
+            free layer).
         start_steps: solver steps of each short solve.
         max_steps: solver steps of the final solve (and of each polish).
         n_orders: fringe orders either side of the best short solve that are solved
@@ -88,8 +99,10 @@ class FitOptions:
         n_alternatives: runner-up minima polished with the final model and reported
             (`FitResult.runner_up_params`, `FitResult.ambiguous`).
         rtol, atol: solver tolerances (on the unconstrained parameters and the loss).
-        bounds: {name: (lo, hi)} overriding `DEFAULT_BOUNDS` (stored as a sorted tuple of
-            pairs; `bounds_dict` gives the dict back).
+        bounds: {name: (lo, hi)} overriding `DEFAULT_BOUNDS` or the default box of a
+            material's scalar (a path name such as "thickness[1]" or
+            "eta[0].coefficients[0]": `params`; checked against the material by the fit)
+            (stored as a sorted tuple of pairs; `bounds_dict` gives the dict back).
         absolute_sigma: treat the fit's `sigma` as exact standard deviations (s² = 1)
             instead of estimating s² from the residuals.
         batching: how the starts are batched: "vmap", "map" (sequential `lax.map`) or
@@ -198,9 +211,10 @@ def _normalise_bounds(bounds):
     items = bounds.items() if isinstance(bounds, dict) else bounds
     out = {}
     for k, v in items:
-        if k not in DEFAULT_BOUNDS:
+        if k not in DEFAULT_BOUNDS and not P.is_path_name(k):
             raise ValueError(f"bounds: unknown parameter {k!r}; expected names from "
-                             f"{list(DEFAULT_BOUNDS)}")
+                             f"{list(DEFAULT_BOUNDS)} or a material's path name such as "
+                             f"'thickness[1]' (thinfilm_jax.fit.params)")
         try:
             lo, hi = (float(t) for t in v)
         except (TypeError, ValueError):
@@ -215,13 +229,15 @@ class FitResult(NamedTuple):
     """Outcome of `fit_film` / `fit_spectrum`.
 
     Attributes:
-        film: the fitted `Film` (fixed fields as given in `initial`).
+        film: the fitted material, a `Film` or a `Stack` as `initial` was (fixed fields as
+            given in `initial`).
         alpha: fitted (or given) GGX α; None for `fit_spectrum`.
         loss: ½ Σ r² at the optimum (weighted residuals).
         converged: True where the final solve met its tolerances
             (``solution.result == optx.RESULTS.successful``).
         steps: number of steps of the final solve.
-        stderr: {name: standard error} for each free parameter (physical units).
+        stderr: {name: standard error} for each free parameter (physical units), keyed by
+            the names as given in `free`.
         correlation: (p, p) correlation matrix of the free parameters, in the order `free`.
         free: names of the free parameters.
         residuals: model − observed (unweighted), shape of the observations.
@@ -239,7 +255,7 @@ class FitResult(NamedTuple):
             see `ambiguous`.
     """
 
-    film: Film
+    film: Film | Stack
     alpha: Array | None
     loss: Array
     converged: Array
@@ -299,7 +315,7 @@ class FitResult(NamedTuple):
     @property
     def params(self) -> dict:
         """{name: fitted value} of the free parameters."""
-        return {k: (self.alpha if k == "alpha" else getattr(self.film, k)) for k in self.free}
+        return {k: P.value_of(self.film, self.alpha, k) for k in self.free}
 
     @property
     def degenerate(self) -> list[tuple[str, str]]:
@@ -322,7 +338,7 @@ class FitResult(NamedTuple):
             return [lst(v) for v in a] if a.ndim > 1 else [f(v) for v in a]
 
         return {
-            "film": {k: f(v) for k, v in self.film._asdict().items()},
+            "film": material_dict(self.film),
             "alpha": f(self.alpha),
             "free": list(self.free),
             "params": {k: f(v) for k, v in self.params.items()},
@@ -340,3 +356,27 @@ class FitResult(NamedTuple):
                            for ru in self.runner_ups],
             "ambiguous": self.ambiguous,
         }
+
+
+def _index_json(eta):
+    """An index for JSON: a real number, {"n": …, "k": …} for a complex one, or an index
+    model's name (its `name`, or its type)."""
+    if callable(eta):
+        return getattr(eta, "name", "") or type(eta).__name__
+    v = complex(np.asarray(eta))
+    if v.imag == 0:
+        return float(v.real) if np.isfinite(v.real) else None
+    return {"n": float(v.real), "k": float(v.imag)}
+
+
+def material_dict(material) -> dict:
+    """A fitted `Film` or `Stack` as plain JSON: numbers, index names for index models, a
+    `Stack` as ``{"thickness": [...], "eta": [...], "eta_base": ..., "eta_outer": ...}``
+    (layer 0 first)."""
+    if isinstance(material, Stack):
+        d = np.asarray(material.thickness, float).reshape(-1)
+        return {"thickness": [float(v) if np.isfinite(v) else None for v in d],
+                "eta": [_index_json(e) for e in material.eta],
+                "eta_base": _index_json(material.eta_base),
+                "eta_outer": _index_json(material.eta_outer)}
+    return {k: _index_json(v) for k, v in material._asdict().items()}

@@ -81,11 +81,14 @@ def complex_dtype(*xs):
     and complex inputs may be mixed (each is read alone: no dtype promotion between them,
     which strict promotion forbids)."""
     bits = 0
-    for x in xs:
+    for x in xs:  # Python numbers and weakly typed arrays follow the others, as in promotion
+        if type(x) in (bool, int, float, complex) or getattr(x, "weak_type", False):
+            continue
         dt = jnp.result_type(x)
-        dt = jnp.finfo(dt).dtype if jnp.issubdtype(dt, jnp.inexact) else jnp.result_type(float)
-        bits = max(bits, np.dtype(dt).itemsize)
-    real = jax.dtypes.canonicalize_dtype(np.float64 if bits > 4 else np.float32)
+        if jnp.issubdtype(dt, jnp.inexact):
+            bits = max(bits, np.dtype(jnp.finfo(dt).dtype).itemsize)
+    real = (jax.dtypes.canonicalize_dtype(np.float64 if bits > 4 else np.float32) if bits
+            else jnp.result_type(float))
     return np.result_type(real, np.complex64)
 
 

@@ -98,7 +98,7 @@ OWN_SCENES = ("sphere", "bubble")
 DISTANCE = 5.0  # camera distance / sphere radius
 FILL = 0.87  # the sphere's diameter / the frame's side
 GRAZING = 0.02  # pixels with ⟨n, ω_o⟩ below this show the map
-CHUNK = 1024  # reference points per call (one progress step)
+CHUNK = 4096  # reference points per call (one progress step)
 MAX_HEIGHT = 256  # the reference's resampling threshold, as envmap_radiance's default
 
 

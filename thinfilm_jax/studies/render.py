@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import textwrap
 import time
 import warnings
 from dataclasses import dataclass
@@ -68,7 +69,6 @@ from ..brdf.carpaint import PAINTS
 from ..shading.carpaint_ibl import paint_envmap_radiance
 from ..shading.colour_table import colour_table_radiance, prefilter_colour
 from .colour_table_study import PAINT_TABLE
-from .scene import fit_title, panel_inches
 
 SCENES = ("fig4", "fig3", "varying")  # the default scenes (films)
 ALL_SCENES = SCENES + ("carpaint",)
@@ -349,6 +349,30 @@ def summary_table(summary) -> str:
     return "\n".join(lines)
 
 
+PANEL_DPI = 100
+
+
+def panel_inches(resolution: int) -> float:
+    """Side of one composite panel (inches): grows with the resolution (one image pixel per
+    figure pixel at `PANEL_DPI`, above a fixed margin for titles)."""
+    return 1.3 + resolution / PANEL_DPI
+
+
+def fit_title(fig, title: str, size: float = 8.5):
+    """`fig.suptitle(title)` wrapped to the figure's width (lines kept where the title has
+    them), its font shrunk until it lies inside the figure."""
+    width = fig.get_size_inches()[0]
+    while True:
+        chars = max(20, int(width * 72 / (0.55 * size)))
+        text = "\n".join(w for line in title.split("\n") for w in textwrap.wrap(line, chars))
+        sup = fig.suptitle(text, fontsize=size)
+        fig.canvas.draw()
+        box = sup.get_window_extent()
+        if (box.x0 >= 0 and box.x1 <= fig.bbox.x1) or size <= 5:
+            return sup
+        size -= 0.5
+
+
 def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:
     import matplotlib
 
@@ -358,7 +382,7 @@ def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:
     methods = _methods(results[0], cfg)
     others = [m for m in methods if m != "reference"]
     ncol = len(methods) + (len(others) if "reference" in methods else 0)
-    side = panel_inches(cfg.resolution)  # grows with the resolution (`scene.panel_inches`)
+    side = panel_inches(cfg.resolution)  # grows with the resolution
     size = (side * ncol + 1.2, (side + 0.2) * len(results) + 0.9)
     fig, axes = plt.subplots(len(results), ncol, figsize=size, squeeze=False,
                              layout="constrained")

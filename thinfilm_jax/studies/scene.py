@@ -74,7 +74,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import textwrap
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -93,6 +92,7 @@ from ..optics.materials import MATERIALS, refractive_index
 from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000, white_xy
 from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 from ..spectral.uplift import basis_on
+from .render import PANEL_DPI, fit_title, panel_inches
 
 OWN_SCENES = ("sphere", "bubble")
 DISTANCE = 5.0  # camera distance / sphere radius
@@ -286,30 +286,6 @@ def write_png(path, srgb) -> Path:
 
 
 # ----------------------------------------------------------------------------- figures
-PANEL_DPI = 100
-
-
-def panel_inches(resolution: int) -> float:
-    """Side of one composite panel: grows with the resolution (one image pixel per figure
-    pixel above the fixed margin for titles)."""
-    return 1.3 + resolution / PANEL_DPI
-
-
-def fit_title(fig, title: str, size: float = 8.5):
-    """`fig.suptitle(title)` wrapped to the figure's width (lines kept where the title has
-    them), its font shrunk until it lies inside the figure."""
-    width = fig.get_size_inches()[0]
-    while True:
-        chars = max(20, int(width * 72 / (0.55 * size)))
-        text = "\n".join(w for line in title.split("\n") for w in textwrap.wrap(line, chars))
-        sup = fig.suptitle(text, fontsize=size)
-        fig.canvas.draw()
-        box = sup.get_window_extent()
-        if (box.x0 >= 0 and box.x1 <= fig.bbox.x1) or size <= 5:
-            return sup
-        size -= 0.5
-
-
 def plot_panels(path, panels, title: str, resolution: int, *, vmax: float = 20.0) -> tuple:
     """Panels side by side: (label, image) with an (H, W, 3) sRGB image or an (H, W) ΔE₀₀ map
     (magma, 0 … `vmax`, one colour bar); the title is wrapped to the figure's width and shrunk

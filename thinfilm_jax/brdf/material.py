@@ -299,7 +299,7 @@ def _fresnel_bands(f: Fresnel, c, dtype):
         return ones
     if f.kind == "schlick":
         return fresnel_schlick(jnp.asarray(f.f0, dtype), c[..., None]) * ones
-    film = Film(*(jnp.asarray(x, dtype) for x in f.film))
+    film = jax.tree.map(lambda x: jnp.asarray(x, dtype), f.film)
     if f.kind in ("dielectric", "conductor"):
         return bare_bands(film, c, f.observer, arithmetic="complex") * ones
     return rgb_reflectance(film, c, observer=f.observer, method=f.method, terms=f.terms)

@@ -280,15 +280,19 @@ def check_film(film, name: str = "film") -> Film:
     if any(_is_model(getattr(film, k)) for k in ("eta_film", "eta_base", "eta_outer")):
         raise ValueError(f"{name} has a dispersive index (an index model): this path takes "
                          f"constant indices only (SPEC §12: the exact methods take it)")
-    film = Film(*(as_array(f"{name}.{k}", v) for k, v in film._asdict().items())).real_base()
-    film = Film(
-        check_range(f"{name}.thickness", film.thickness, 0.0, why=" (nm, d >= 0)"),
-        check_range(f"{name}.eta_film", film.eta_film, 1.0, why=" (supported domain eta >= 1)"),
-        check_range(f"{name}.eta_base", film.eta_base, 0.0, lo_open=True),
-        check_range(f"{name}.kappa_base", film.kappa_base, 0.0,
-                    why=" (absorption kappa >= 0; a complex eta_base n + ik needs k >= 0)"),
-        check_range(f"{name}.eta_outer", film.eta_outer, 1.0,
-                    why=" (supported domain eta >= 1)"),
+    # Field by field by name (a list field is a pytree node, not a leaf: no tree.map here).
+    film = film._replace(**{k: as_array(f"{name}.{k}", v)
+                            for k, v in film._asdict().items()}).real_base()
+    film = film._replace(
+        thickness=check_range(f"{name}.thickness", film.thickness, 0.0, why=" (nm, d >= 0)"),
+        eta_film=check_range(f"{name}.eta_film", film.eta_film, 1.0,
+                             why=" (supported domain eta >= 1)"),
+        eta_base=check_range(f"{name}.eta_base", film.eta_base, 0.0, lo_open=True),
+        kappa_base=check_range(f"{name}.kappa_base", film.kappa_base, 0.0,
+                               why=" (absorption kappa >= 0; a complex eta_base n + ik needs "
+                                   "k >= 0)"),
+        eta_outer=check_range(f"{name}.eta_outer", film.eta_outer, 1.0,
+                              why=" (supported domain eta >= 1)"),
     )
     check_broadcast((f"{name}.{k}", v) for k, v in film._asdict().items())
     return film

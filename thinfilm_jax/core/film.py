@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
@@ -34,7 +35,7 @@ class Film(NamedTuple):
 
     def astype(self, dtype) -> Film:
         """All fields as arrays of `dtype` (e.g. to run a real-time path in float32)."""
-        return Film(*(jnp.asarray(x, dtype) for x in self.real_base()))
+        return jax.tree.map(lambda x: jnp.asarray(x, dtype), self.real_base())
 
     def real_base(self) -> Film:
         """The same film with a real `eta_base`: a complex ``eta_base = n + ik`` is read as the

@@ -204,20 +204,22 @@ def _airy_jit(film, cos_theta, wavelength, arithmetic):
     layout) the pairs run in blocks of `BLOCK` (`jax.lax.map`): XLA:CPU writes every
     intermediate it does not fuse to memory, and at 10⁶ pairs those round trips, not the
     arithmetic, dominated. With structure, `_airy_direct` forms the Fresnel terms per angle."""
-    args = (*film, cos_theta, wavelength)
-    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in args))
+    leaves, tree = jax.tree.flatten((film, cos_theta, wavelength))
+    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in leaves))
     n = math.prod(shape)
-    if math.prod(jnp.broadcast_shapes(*(jnp.shape(x) for x in args[:-1]))) < n or n <= 2 * BLOCK:
+    no_wavelength = jax.tree.leaves((film, cos_theta))
+    if math.prod(jnp.broadcast_shapes(*(jnp.shape(x) for x in no_wavelength))) < n \
+            or n <= 2 * BLOCK:
         return _airy_direct(film, cos_theta, wavelength, arithmetic)
-    mapped = [i for i, x in enumerate(args) if jnp.size(x) > 1]  # the others are constants
+    mapped = [i for i, x in enumerate(leaves) if jnp.size(x) > 1]  # the others are constants
 
     def block(xs):
-        vals = [None if i in mapped else jnp.reshape(x, ()) for i, x in enumerate(args)]
+        vals = [None if i in mapped else jnp.reshape(x, ()) for i, x in enumerate(leaves)]
         for i, x in zip(mapped, xs):
             vals[i] = x
-        return _airy_direct(Film(*vals[:5]), vals[5], vals[6], arithmetic)
+        return _airy_direct(*jax.tree.unflatten(tree, vals), arithmetic)
 
-    xs = tuple(jnp.reshape(jnp.broadcast_to(args[i], shape), (n,)) for i in mapped)
+    xs = tuple(jnp.reshape(jnp.broadcast_to(leaves[i], shape), (n,)) for i in mapped)
     return jnp.reshape(jax.lax.map(block, xs, batch_size=BLOCK), shape)
 
 
@@ -236,5 +238,6 @@ def _airy_direct(film, cos_theta, wavelength, arithmetic):
 
 def broadcast_all(film: Film, *args):
     """Broadcast every film field and every extra argument to one common shape."""
-    arrays = jnp.broadcast_arrays(*film, *args)
-    return (Film(*arrays[:5]), *arrays[5:])
+    leaves, tree = jax.tree.flatten((film, args))
+    film, args = jax.tree.unflatten(tree, jnp.broadcast_arrays(*leaves))
+    return (film, *args)

@@ -345,10 +345,10 @@ def scan_bins(film: Film, cos_bins, std_bins, bands, *, extra=None,
     against the film would be materialised instead."""
     cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
     k = max(cos_bins.shape[-1], std_bins.shape[-1])
-    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in film), cos_bins.shape[:-1],
-                                 std_bins.shape[:-1],
+    shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in jax.tree.leaves(film)),
+                                 cos_bins.shape[:-1], std_bins.shape[:-1],
                                  *(() if extra is None else (jnp.shape(extra)[1:-1],)))
-    film = Film(*(jnp.broadcast_to(jnp.asarray(x), shape) for x in film))
+    film = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x), shape), film)
     xs = [jnp.moveaxis(jnp.broadcast_to(x, shape + (k,)), -1, 0) for x in (cos_bins, std_bins)]
     if extra is not None:
         xs.append(jnp.broadcast_to(extra, (k,) + shape + jnp.shape(extra)[-1:]))

@@ -181,8 +181,8 @@ def khr_reflectance(film: Film, cos_theta) -> Array:
 
 @jax.jit
 def _khr_jit(film, cos_theta):
-    arrays = jnp.broadcast_arrays(*film, cos_theta)
-    return khr_bands(Film(*arrays[:5]), arrays[5])
+    leaves, tree = jax.tree.flatten((film, cos_theta))
+    return khr_bands(*jax.tree.unflatten(tree, jnp.broadcast_arrays(*leaves)))
 
 
 #: Rec. 709 (D65) → XYZ: the inverse of the extension's matrix (white (0.95047, 1, 1.08883)).

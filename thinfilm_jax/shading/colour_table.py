@@ -155,12 +155,19 @@ def map_fingerprint(envmap) -> str:
 
 
 def _film_fingerprint(film: Film, alpha) -> tuple:
-    vals = [np.asarray(x, np.float64) for x in (*film, alpha)]
+    """("film", each of `Film._fields` in that order, alpha), all Python floats."""
+    vals = [np.asarray(x, np.float64) for x in (*(getattr(film, k) for k in Film._fields),
+                                                 alpha)]
     if any(v.size != 1 for v in vals):
         raise ValueError("prefilter_colour builds the table of one homogeneous material: "
                          "film fields and alpha must be scalars, got shapes "
                          f"{[v.shape for v in vals]}")
     return ("film",) + tuple(float(v.reshape(())) for v in vals)
+
+
+def _fingerprint_film(key: tuple) -> Film:
+    """The `Film` (float fields, by name) that a `_film_fingerprint` key describes."""
+    return Film(**dict(zip(Film._fields, key[1:-1], strict=True)))
 
 
 def _paint_fingerprint(paint: CarPaint) -> tuple:
@@ -295,7 +302,7 @@ def _integrand(material, alpha: float, env: EnvMap, subdivisions, observer, n_co
     if isinstance(material, CarPaint):
         point, mat = _paint_point, CarPaint(*(jnp.asarray(x, dt) for x in material))
     else:
-        film = Film(*(jnp.asarray(x, dt) for x in material))
+        film = jax.tree.map(lambda x: jnp.asarray(x, dt), material)
         r_tab = _r_table(film, cross_band_name(observer), n_cos,
                          choose_arithmetic(film, "auto"), dt)
         point, mat = _film_point, (jnp.asarray(alpha, dt), r_tab)
@@ -390,7 +397,7 @@ def prefilter_colour(envmap, material, alpha=None, *, observer: str = DEFAULT_OB
                          f"map's {env.shape}")
     start = time.perf_counter()
     f64 = jnp.result_type(float)  # float64 where enabled (the reference precision)
-    point, mat, d, wgt, light = _integrand(material if paint else Film(*key[1:6]), a_min,
+    point, mat, d, wgt, light = _integrand(material if paint else _fingerprint_film(key), a_min,
                                            env, subdivisions, observer, n_cos, f64)
     omega_r = jnp.asarray(texel_centers(h, w).reshape(-1, 3), f64)
     u = view_nodes(n_view)

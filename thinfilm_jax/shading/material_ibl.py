@@ -57,7 +57,6 @@ import numpy as np
 from ..brdf import material as M
 from ..brdf.ndf import walter_alpha
 from ..core import _validate as V
-from ..core.film import Film
 from ..optics.airy import choose_arithmetic
 from ..spectral.reflectance import spectral_bands
 from ..spectral.spectra import get_observer
@@ -101,8 +100,8 @@ def _point_terms(material, dirs, n, wo, t, table, cfg):
         c = jnp.clip(jnp.sum(hs * dirs, -1) / jnp.sqrt(jnp.where(ok, hn2, 1.0)), 0.0, 1.0)
         if n_cos is None:
             f = material.fresnel
-            r = spectral_bands(Film(*(jnp.asarray(x, dirs.dtype)[..., None] for x in f.film)),
-                               c, obs, arithmetic=arithmetic)
+            film = jax.tree.map(lambda x: jnp.asarray(x, dirs.dtype)[..., None], f.film)
+            r = spectral_bands(film, c, obs, arithmetic=arithmetic)
         else:
             r = _interp(table, c)
         spec = (dv * ci)[:, None] * r

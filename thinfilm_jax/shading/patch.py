@@ -36,6 +36,7 @@ lies below the albedo A(θ_o, α), since 0 ≤ R ≤ 1):
 from __future__ import annotations
 
 import functools
+import math
 
 import jax
 import jax.numpy as jnp
@@ -107,7 +108,7 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
     if lut is not None and not isinstance(lut, ShatLUT):
         raise TypeError(f"lut must be a ShatLUT (build_shat_lut) or None, got "
                         f"{type(lut).__name__}")
-    dtype = jnp.result_type(theta_o, alpha, *film, float)
+    dtype = jnp.result_type(theta_o, alpha, *jax.tree.leaves(film), float)
     if options.shat == "lut" and lut is None:
         lut = build_shat_lut(observer, dtype=dtype)
     options = options._replace(arithmetic=choose_arithmetic(film, options.arithmetic),
@@ -121,13 +122,16 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
 def _patch_jit(film, theta_o, alpha, tables, cfg, shape):
     method, observer, options, batch = cfg
     lut, table = tables
-    args = [jnp.broadcast_to(jnp.asarray(x), shape).reshape(-1) for x in (*film, theta_o, alpha)]
+    # One flat pytree (film, θ_o, α) of per-point vectors; lax.map slices every leaf.
+    flat = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x), shape).reshape(-1),
+                        (film, theta_o, alpha))
 
     def one(xs):
-        return patch_one(Film(*xs[:5]), xs[5], xs[6], method=method, observer=observer,
-                         options=options, lut=lut, table=table)
+        f, t, a = xs
+        return patch_one(f, t, a, method=method, observer=observer, options=options, lut=lut,
+                         table=table)
 
-    out = jax.lax.map(one, tuple(args), batch_size=min(batch, max(args[0].shape[0], 1)))
+    out = jax.lax.map(one, flat, batch_size=min(batch, max(math.prod(shape), 1)))
     return out.reshape(*shape, out.shape[-1])
 
 

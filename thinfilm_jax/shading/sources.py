@@ -64,6 +64,7 @@ from jax import Array
 
 from .envmap import EnvMap, load_envmap, luminance_weights, texel_centers, texel_solid_angles
 from ..core.film import Film
+from ..core.material import expand_batch
 from ..realtime.filtered import filtered_bands
 from ..optics.fresnel import complex_dtype
 from ..spectral.lut import ShatLUT, build_shat_lut
@@ -394,7 +395,7 @@ def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observ
             out = r if out is None else out + r
     else:  # the cross bands (or the plain ones, diagonal) for all sources at once
         mass, mu_c, var_c = (jnp.stack(x, axis=-1) for x in (mass, mu_c, var_c))  # (..., S)
-        f3 = Film(*(jnp.asarray(x)[..., None] for x in film))
+        f3 = expand_batch(film)
         obs = cross_band_name(observer) if cross_band else observer
         r = filtered_bands(f3, cos_incidence_from_projection(mu_c),
                            taylor_opd_moments(f3, mu_c, var_c), obs, shat=shat, lut=lut,

@@ -106,7 +106,7 @@ def _cost(cfg, film, alpha, table, pref):
     """Warm ns per point of the real-time methods, float32, `timing_points` points."""
     n, v = shading_points(cfg.timing_points, cfg.seed + 1)
     n32, v32 = jnp.asarray(n, jnp.float32), jnp.asarray(v, jnp.float32)
-    f32 = Film(*(jnp.float32(x) for x in film))
+    f32 = jax.tree.map(jnp.float32, film)
     t32 = jax.tree.map(lambda x: x.astype(jnp.float32), table)
     p32 = pref.astype(jnp.float32)
     a32 = jnp.float32(alpha)

@@ -42,6 +42,7 @@ import numpy as np
 
 from ..optics.airy import airy_reflectance
 from ..core.film import Film
+from ..core.material import expand_batch
 from ..realtime.kernels import filtered_kernel, ideal_kernel, lobe_moments
 from ..spectral.lut import build_shat_lut, lut_max_error
 from ..realtime.options import ModelOptions
@@ -121,7 +122,7 @@ def subsampled_observer(observer: str, step: int):
 
 def spectral_subsampled(film: Film, cos_theta, lam, weights, arithmetic: str = "complex"):
     """Σ_k W_kj R(θ, λ_k) with `airy_reflectance` on the given nodes (broadcast inputs)."""
-    film_k = Film(*(jnp.asarray(x)[..., None] for x in film))
+    film_k = expand_batch(film)
     dtype = jnp.result_type(cos_theta, float)
     r = airy_reflectance(film_k, jnp.asarray(cos_theta)[..., None], jnp.asarray(lam, dtype),
                          arithmetic=arithmetic)
@@ -281,8 +282,8 @@ def bench_patches(cfg: BenchConfig, verbose: bool = True):
     for n in cfg.mc_samples:
         def mc(f, t, a, keys, n=n):
             def one(x):
-                return patch_radiance_mc(Film(*x[:5]), x[5], x[6], x[7], n_samples=n)
-            return jax.lax.map(one, (*f, t, a, keys))
+                return patch_radiance_mc(*x, n_samples=n)
+            return jax.lax.map(one, (f, t, a, keys))
 
         log(f"(b) Monte Carlo {n}", verbose)
         (mean, se), t, ch = chunked_mc(jax.jit(mc), mc_args, cfg.mc_chunk, cfg.repeats)

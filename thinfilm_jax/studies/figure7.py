@@ -119,7 +119,8 @@ def compute_figure7(cfg: Figure7Config = Figure7Config(), progress: bool = True,
     programs: dict = {}  # one compiled map per (method, options), shared by both rows
     for row in ROWS:
         film, t, a = _row_inputs(cfg, row)
-        flat = [np.asarray(np.broadcast_to(x, t.shape), float).reshape(-1) for x in (*film, t, a)]
+        flat = jax.tree.map(lambda x: np.asarray(np.broadcast_to(x, t.shape), float).reshape(-1),
+                            (film, t, a))  # (film, θ_o, α) of flat per-point arrays
         # "auto" arithmetic resolved on the concrete film: inside the map it is traced
         opts = options._replace(arithmetic=choose_arithmetic(film, options.arithmetic))
         for method in METHOD_ORDER:
@@ -133,8 +134,7 @@ def compute_figure7(cfg: Figure7Config = Figure7Config(), progress: bool = True,
             parts = []
             for s in range(0, n * n, step):
                 sl = slice(s, s + step)
-                f = Film(*(x[sl] for x in flat[:5]))
-                parts.append(to_host(shade(f, flat[5][sl], flat[6][sl])))
+                parts.append(to_host(shade(*jax.tree.map(lambda x: x[sl], flat))))
                 bar.update(parts[-1].shape[0])
             out["values"][row][method] = np.concatenate(parts).reshape(n, n, -1)
             out["seconds"][f"{row}/{method}"] = time.perf_counter() - t0

@@ -145,7 +145,7 @@ def reference_speedup(env, alphas=(0.05, 0.25, 0.6), resolution=8, repeats=3, ve
     mask, n = sphere(resolution, wo, right, up)
     pts = n[mask]
     k = len(pts)
-    film = Film(*(jnp.full(k, x) for x in Film(600.0, 1.2, 2.0, 0.0)))
+    film = jax.tree.map(lambda x: jnp.full(k, x), Film(600.0, 1.2, 2.0, 0.0))
     rows = []
     for alpha in alphas:
         def call(exhaustive, alpha=alpha):

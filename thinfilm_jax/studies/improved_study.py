@@ -48,7 +48,6 @@ import numpy as np
 
 from ..core._io import atomic_write, write_json
 from ..spectral.colorimetry import delta_e2000
-from ..core.film import Film
 from ..realtime.improved import bin_table, improved_kernel
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..spectral.lut import build_shat_lut
@@ -131,7 +130,7 @@ def fig7_grid(row: str, n: int):
 
     film, t, a = _row_inputs(Figure7Config(resolution=n), row)
     shape = t.shape
-    film = Film(*(np.broadcast_to(np.asarray(x, float), shape).ravel() for x in film))
+    film = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x, float), shape).ravel(), film)
     t, a = t.ravel(), np.broadcast_to(a, shape).ravel()
     labels = np.array([f"fig7 d={x:.0f} θo={np.degrees(y):.1f}° α={z:.3g}"
                        for x, y, z in zip(film.thickness, t, a)])
@@ -372,8 +371,7 @@ def ibl_floor(indices=(0, 1, 2, 3, 4, 7), npz="figures/ibl_render.npz", verbose=
         d, wt, idx = texel_nodes(*env.shape, auto_subdivisions(env.shape[0], alpha))
         dirs = jnp.asarray(d)
         light = jnp.asarray(wt)[:, None] * jnp.asarray(env.radiance).reshape(-1, 3)[idx]
-        table = _r_table(Film(*(jnp.asarray(x) for x in film)), obs, 1024, "complex",
-                         jnp.float64)
+        table = _r_table(jax.tree.map(jnp.asarray, film), obs, 1024, "complex", jnp.float64)
 
         def one(nn, wo=jnp.asarray(wo), dirs=dirs, light=light, table=table, alpha=alpha):
             w, c = _lobe_cos_weight(dirs, nn, wo, alpha)

@@ -115,9 +115,10 @@ def shading_points(n: int, seed: int = 0):
                                                         quadrature=(16, 16)))
     it, ia = rng.integers(0, 16, n), rng.integers(0, 8, n)
     wo = np.stack([np.sin(tg[it]), np.zeros(n), np.cos(tg[it])], -1)
-    film = (rng.uniform(0, 1000, n), rng.uniform(1.2, 2.4, n), rng.uniform(1.0, 2.5, n),
-            rng.uniform(0.0, 3.0, n), np.ones(n))
-    return dict(film=tuple(jnp.asarray(x, F32) for x in film), wo=jnp.asarray(wo, F32),
+    film = dict(thickness=rng.uniform(0, 1000, n), eta_film=rng.uniform(1.2, 2.4, n),
+                eta_base=rng.uniform(1.0, 2.5, n), kappa_base=rng.uniform(0.0, 3.0, n),
+                eta_outer=np.ones(n))
+    return dict(film={k: jnp.asarray(x, F32) for k, x in film.items()}, wo=jnp.asarray(wo, F32),
                 mean=jnp.asarray(mean[it, ia], F32), cov=jnp.asarray(cov[it, ia], F32),
                 cos_o=jnp.asarray(wo[:, 2], F32), alpha=jnp.asarray(ag[ia], F32),
                 normal=jnp.asarray(np.tile([0.0, 0.0, 1.0], (n, 1)), F32))
@@ -128,7 +129,7 @@ def programs(pkg, pts, pref_np, envmap: bool = True):
     K = _module(pkg, "realtime.kernels", "kernels")
     I = _module(pkg, "realtime.improved", "improved")  # noqa: E741
     L = _module(pkg, "spectral.lut", "lut")
-    film = pkg.Film(*pts["film"])
+    film = pkg.Film(**pts["film"])  # by field name: the same in every checkout's Film
     lut = L.build_shat_lut(dtype=F32)
     tab = I.bin_table(dtype=F32)
     out = {

@@ -41,6 +41,7 @@ import json
 import time
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from ..brdf import material as M
@@ -208,16 +209,16 @@ def film_method_rows(cfg: ModelsConfig, log=print):
         t7 = np.radians(np.linspace(0.0, 85.0, cfg.fig7_theta))
         sa = np.linspace(0.1, 1.0, cfg.fig7_sqrt_alpha)
         a, b = np.meshgrid(t7, sa**2, indexing="ij")
-        f7 = FILMS["fig7 600 nm"]
-        grids["Figure 7 (a–d): d = 600 nm, θ_o × √α"] = (Film(*f7[:3], f7[3]), a, b)
+        f7 = _film("fig7 600 nm")
+        grids["Figure 7 (a–d): d = 600 nm, θ_o × √α"] = (f7, a, b)
         d = np.linspace(0.0, 1000.0, cfg.fig7_d)
         a, dd = np.meshgrid(t7, d, indexing="ij")
-        grids["Figure 7 (e–h): α = 0.25, θ_o × d"] = (Film(dd, *f7[1:3], f7[3]), a,
+        grids["Figure 7 (e–h): α = 0.25, θ_o × d"] = (f7._replace(thickness=dd), a,
                                                        np.full_like(a, 0.25))
     rows, keep = [], {}
     for gname, (film, th, al) in grids.items():
         npts = th.size
-        film = Film(*(np.broadcast_to(np.asarray(x, float), th.shape) for x in film))
+        film = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x, float), th.shape), film)
         ref, c_ref, _ = _timed(lambda f, t, x: patch_radiance(f, t, x, method="reference"),
                                (film, th, al), cfg.repeats, npts)
         rows.append({"grid": gname, "method": "reference", "dE2000_mean": 0.0,

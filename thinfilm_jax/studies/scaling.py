@@ -68,6 +68,8 @@ QUICK = dict(reference_resolution=8, ideal_resolution=32, ibl_resolution=48, map
 # ----------------------------------------------------------------------------- the child
 def _inputs(cfg: ScalingConfig, name: str):
     """(block function, in_axes, arguments, items) of one workload."""
+    import jax
+
     from ..optics.airy import choose_arithmetic
     from ..core.film import Film
     from ..realtime.options import ModelOptions
@@ -79,12 +81,13 @@ def _inputs(cfg: ScalingConfig, name: str):
         f7 = figure7.Figure7Config(
             resolution=cfg.reference_resolution if ref else cfg.ideal_resolution)
         film, t, a = figure7._row_inputs(f7, "thickness")
-        flat = [np.asarray(np.broadcast_to(x, t.shape), float).reshape(-1) for x in (*film, t, a)]
+        flat = jax.tree.map(lambda x: np.asarray(np.broadcast_to(x, t.shape), float).reshape(-1),
+                            (film, t, a))  # (film, θ_o, α) of flat per-point arrays
         opts = ModelOptions(quadrature=tuple(f7.quadrature), terms=f7.terms,
                             arithmetic=choose_arithmetic(film))
         fn = functools.partial(figure7._patches, method="reference" if ref else "ideal",
                                observer=f7.observer, options=opts)
-        return fn, 0, (Film(*flat[:5]), flat[5], flat[6]), flat[0].size
+        return fn, 0, flat, t.size
     if name == "ibl_filtered":
         from ..shading.envmap import load_envmap
         from ..shading.ibl import REALTIME_OPTIONS

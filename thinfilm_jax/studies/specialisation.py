@@ -142,8 +142,11 @@ def run_specialisation(cfg: BenchConfig, out=None, verbose: bool = True) -> dict
     sets, alpha = shading_points(n)
     lut = build_shat_lut(dtype=jnp.float32)
     k = min(n, N_REFERENCE)
-    refs = {key: np.asarray(rgb_reflectance(Film(*(np.asarray(x[:k], np.float64) for x in f)),
-                                            np.asarray(c[:k], np.float64), method="spectral"))
+
+    def first_k(tree):  # the first k points of every leaf, float64
+        return jax.tree.map(lambda x: np.asarray(x[:k], np.float64), tree)
+
+    refs = {key: np.asarray(rgb_reflectance(first_k(f), first_k(c), method="spectral"))
             for key, (f, c, *_) in sets.items()}
     cache = {}
 

@@ -31,7 +31,7 @@ from ..shading.patch import patch_radiance
 from ..spectral.reflectance import rgb_reflectance
 from ..optics.series import series_terms
 from ..spectral.spectra import gaussian_fit_error, sensitivity_ft, shat_at_zero, shat_host
-from ._common import CIE, MATERIALS, SB
+from ._common import CIE, SB
 from ._timing import as_dtype, environment, fmt, log, take
 from .stiff import (
     BOUND_SLACK,
@@ -306,7 +306,11 @@ def check_patch(dtype: str = "float64", method: str = "reference",
             ref_check(res, err, tol, case_args, call,
                        f"A · rgb_reflectance(fourier, cos θ_o), ≤ {tol:g}")
             if dtype == "float32":  # what a user gets from np.float32(np.pi / 2) = π/2 + 4e-8
-                f7 = Film(*MATERIALS["fig7"][:3], 1.0).astype(jnp.float32)
+                # The film this check has always used, by name: the positional
+                # Film(*MATERIALS["fig7"][:3], 1.0) read η₂, η₃, κ₃ of "fig7" as d, η₂, η₃
+                # (figures/stability_report.md holds its result).
+                f7 = Film(thickness=1.3, eta_film=2.0, eta_base=0.5,
+                          kappa_base=1.0).astype(jnp.float32)
                 over = np.asarray(patch_radiance(f7, np.float32(np.pi / 2), np.float32(0.3),
                                                  method=method,
                                                      options=ModelOptions(quadrature=(q, q))))

@@ -31,9 +31,19 @@ byte-order mark is read too).
 
 * ``initial``: ``{"thickness": nm, "eta_film": ..., "eta_base": ..., "kappa_base": 0,
   "eta_outer": 1}``; ``eta_film`` and ``eta_base`` are required (fixed values or initial
-  guesses), thickness defaults to 500 nm, κ₃ to 0, η₁ to 1.
+  guesses), thickness defaults to 500 nm, κ₃ to 0, η₁ to 1. Each index (``eta_film``,
+  ``eta_base``, ``eta_outer``) is a number (it stays a number) or a material (SPEC §12,
+  `thinfilm_jax.optics.materials.refractive_index`): a bundled name (``"SiO2"``, ``"Si"``,
+  ``"Si3N4"``, ...) or the path of a refractiveindex.info YAML or a CSV file; an unknown
+  name is an error that lists the bundled ones.
+* ``layers``: a layer stack instead of one film (`Stack`), ``"SiO2:250,Si3N4:80"`` (or a
+  list ``["SiO2:250", "Si3N4:80"]``): ``material:thickness_nm`` per layer, layer 0 (facing
+  the outer medium) first, each material a name, a file or a number; ``initial`` then
+  gives ``eta_base`` (and ``eta_outer``, ``kappa_base`` for a numeric base) only.
 * ``free``: parameters to fit (default ``thickness``): `Film` fields, and ``alpha`` for
-  patches.
+  patches; with ``layers`` ``thickness[i]`` (layer i; ``thickness`` is layer 0); a
+  material's own parameters by path, e.g. ``eta_film.coefficients[0]``
+  (`thinfilm_jax.fit.params`).
 * optional: ``method`` (default ``reference``), ``refine_method``, ``observer``
   (``stiles_burch_1959_10`` or ``cie_1931_2``), ``bounds`` (``{"thickness": [0, 2000]}``),
   ``solver``, ``n_starts``, ``n_solves``, ``max_steps``, ``quadrature`` (``[16, 16]``),
@@ -52,8 +62,15 @@ Example CSV::
 The output may not be the input file itself nor a directory (checked before fitting); it is
 written atomically, so an interrupted run (Ctrl-C) leaves no partial file.
 
-The output JSON holds the input path, the kind, the settings used and the `FitResult`
-summary (`FitResult.to_dict`: fitted film, α, free parameters with standard errors,
+**Command-line overrides** (`add_arguments`): ``--eta-film``, ``--eta-base``,
+``--eta-outer`` (a number, a bundled material name or a file), ``--kappa-base``,
+``--thickness``, ``--layers "SiO2:250,Si3N4:80"`` and ``--free thickness[0] thickness[1]``
+replace the file's settings; a bad value (an unknown material, a malformed layer list) is a
+usage error (exit status 2) naming the option, before anything is fitted.
+
+The output JSON holds the input path, the kind, the settings used (materials as given:
+numbers, names or paths) and the `FitResult` summary (`FitResult.to_dict`: the fitted film
+or stack (thicknesses and index names), α, free parameters with standard errors,
 correlation matrix, degenerate pairs, loss, convergence, residuals).
 """
 
@@ -80,12 +97,16 @@ settings: JSON keys or CSV comment lines '# key = value' above the header (UTF-8
   initial = {"thickness": 400, "eta_film": 1.3, "eta_base": 2.0, "kappa_base": 0.5}
   free = thickness, eta_film     (Film fields and, for patches, alpha; default thickness)
   method = reference | filtered | ...   refine_method, observer, bounds, solver,
-  n_starts, n_solves, max_steps, quadrature, absolute_sigma (optional)."""
+  n_starts, n_solves, max_steps, quadrature, absolute_sigma (optional).
+materials: an index is a number, a bundled name (SiO2, Si, Si3N4, ...) or a .yml/.csv
+  file; layers = SiO2:250,Si3N4:80 (a stack, layer 0 on top) with free = thickness[0],
+  thickness[1]. The options below override the file's settings."""
 
 SETTINGS = ("alpha", "initial", "free", "method", "refine_method", "observer", "bounds",
             "solver", "n_starts", "n_solves", "max_steps", "quadrature", "absolute_sigma",
-            "theta_deg", "sigma", "kind")
+            "theta_deg", "sigma", "kind", "layers")
 INITIAL_KEYS = ("thickness", "eta_film", "eta_base", "kappa_base", "eta_outer")
+INDEX_KEYS = ("eta_film", "eta_base", "eta_outer")
 INITIAL_DEFAULTS = {"thickness": 500.0, "kappa_base": 0.0, "eta_outer": 1.0}
 BAND_COLUMNS = {"stiles_burch_1959_10": ("R", "G", "B"), "cie_1931_2": ("X", "Y", "Z")}
 
@@ -292,12 +313,117 @@ def _in_range(path, name, a, lo, hi, unit=""):
         _fail(path, f"{name} = {a[bad].flat[0]!r} lies outside [{lo}, {hi}]{unit}")
 
 
+def parse_index(source):
+    """An index from the command line or a settings file (SPEC §12): a number stays a number
+    (real, or complex such as ``3.9+0.02j``); a string that is not a number is a bundled
+    material name or the path of a refractiveindex.info YAML / CSV file
+    (`thinfilm_jax.optics.materials.refractive_index`). ValueError (listing the bundled
+    names) for anything else.
+
+    Example:
+        >>> parse_index("1.46"), parse_index(2), parse_index("3.9+0.02j")
+        (1.46, 2.0, (3.9+0.02j))
+        >>> parse_index("SiO2").name
+        'SiO2'
+    """
+    if isinstance(source, bool) or source is None:
+        raise ValueError(f"an index must be a number, a material name or a file, got "
+                         f"{source!r}")
+    if isinstance(source, int | float):
+        v = float(source)
+    else:
+        text = str(source).strip()
+        try:
+            v = float(text)
+        except ValueError:
+            try:
+                v = complex(text)
+            except ValueError:
+                from ..optics.materials import refractive_index
+
+                try:
+                    return refractive_index(text)
+                except ValueError as e:
+                    raise ValueError(str(e).removeprefix("refractive_index: ")) from None
+    if not (math.isfinite(v.real) and math.isfinite(v.imag)):
+        raise ValueError(f"an index must be finite, got {source!r}")
+    return v
+
+
+def parse_layers(source) -> list[tuple[str, float]]:
+    """A layer list ``"SiO2:250,Si3N4:80"`` (or a list of ``"material:nm"`` strings) →
+    [(material, thickness_nm)], layer 0 first; each material is checked (`parse_index`).
+    ValueError naming the malformed entry.
+
+    Example:
+        >>> parse_layers("SiO2:250, Si3N4:80")
+        [('SiO2', 250.0), ('Si3N4', 80.0)]
+    """
+    items = source.split(",") if isinstance(source, str) else source
+    if not isinstance(items, list | tuple) or not items:
+        raise ValueError(f"layers must be 'material:thickness_nm,...' (layer 0 first), got "
+                         f"{source!r}")
+    out = []
+    for i, item in enumerate(items):
+        text = str(item).strip()
+        if ":" not in text:
+            raise ValueError(f"layer {i} {text!r} is not 'material:thickness_nm' (e.g. "
+                             f"'SiO2:250')")
+        mat, d = (t.strip() for t in text.rsplit(":", 1))
+        try:
+            nm = float(d)
+        except ValueError:
+            raise ValueError(f"layer {i} {text!r}: thickness {d!r} is not a number (nm)") \
+                from None
+        if not (math.isfinite(nm) and nm >= 0):
+            raise ValueError(f"layer {i} {text!r}: thickness must be finite and >= 0 nm")
+        try:
+            parse_index(mat)
+        except ValueError as e:
+            raise ValueError(f"layer {i} {text!r}: {e}") from None
+        out.append((mat, nm))
+    return out
+
+
+def _index_setting(path, where, value):
+    """A file's index value: a number, or a material name / file (checked now)."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return _number(path, where, value)
+    try:
+        parse_index(value)
+    except ValueError as e:
+        _fail(path, f"{where}: {e}")
+    return value
+
+
+def material_of(desc: dict):
+    """The `Film` or `Stack` of a checked settings description (`_settings`): numbers stay
+    numbers, names and files become index models."""
+    from ..core.film import Film
+    from ..core.stack import Stack
+
+    idx = {k: parse_index(desc[k]) for k in INDEX_KEYS if k in desc}
+    if "layers" not in desc:
+        return Film(desc["thickness"], idx["eta_film"], idx["eta_base"], desc["kappa_base"],
+                    idx["eta_outer"])
+    base = idx["eta_base"]
+    if desc["kappa_base"]:
+        if callable(base):
+            raise ValueError("initial.kappa_base must be 0 when eta_base is a material (the "
+                             "material carries κ)")
+        base = complex(base) + 1j * desc["kappa_base"]
+    layers = desc["layers"]
+    return Stack([d for _, d in layers], tuple(parse_index(m) for m, _ in layers), base,
+                 idx["eta_outer"])
+
+
 def _settings(path, obs, kind):
     unknown = [k for k in obs if k not in SETTINGS and k not in
                ("theta_o_deg", "observed", "wavelength_nm", "R")]
     if unknown:
         _fail(path, f"unknown key(s) {unknown}; settings are {list(SETTINGS)}")
     init = obs.get("initial")
+    layers = obs.get("layers")
     if not isinstance(init, dict):
         _fail(path, "missing setting 'initial' (an object with at least eta_film and eta_base, "
                     "e.g. {\"eta_film\": 1.3, \"eta_base\": 2.0, \"kappa_base\": 0.5})")
@@ -305,9 +431,21 @@ def _settings(path, obs, kind):
     if bad:
         _fail(path, f"initial: unknown field(s) {bad}; expected {list(INITIAL_KEYS)}")
     film = {}
+    if layers is not None:
+        for k in ("thickness", "eta_film"):
+            if k in init:
+                _fail(path, f"initial.{k} does not apply with layers (each layer gives its "
+                            f"material and thickness)")
+        try:
+            film["layers"] = parse_layers(layers)
+        except ValueError as e:
+            _fail(path, f"layers: {e}")
     for k in INITIAL_KEYS:
+        if layers is not None and k in ("thickness", "eta_film"):
+            continue
         if k in init:
-            film[k] = _number(path, f"initial.{k}", init[k])
+            film[k] = (_index_setting(path, f"initial.{k}", init[k]) if k in INDEX_KEYS
+                       else _number(path, f"initial.{k}", init[k]))
         elif k in INITIAL_DEFAULTS:
             film[k] = INITIAL_DEFAULTS[k]
         else:
@@ -384,24 +522,117 @@ def check_output(path: Path, out: Path, overwrite: bool) -> None:
             break
 
 
+def add_arguments(parser) -> None:
+    """The ``fit`` sub-command's arguments on `parser`: the observations file, ``--out``,
+    ``--overwrite`` and the material overrides (module docstring); bad override values are
+    `parser.error` usage errors (exit status 2).
+
+    Example:
+        >>> import argparse
+        >>> p = argparse.ArgumentParser(prog="thinfilm-jax fit")
+        >>> add_arguments(p)
+        >>> a = p.parse_args(["obs.csv", "--layers", "SiO2:250,Si3N4:80", "--eta-base", "Si",
+        ...                   "--free", "thickness[0]", "thickness[1]"])
+        >>> a.layers, a.eta_base, a.free
+        ('SiO2:250,Si3N4:80', 'Si', ['thickness[0]', 'thickness[1]'])
+    """
+    parser.add_argument("observations", help="CSV or JSON file of observations")
+    parser.add_argument("--out", required=False, help="result JSON path")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    g = parser.add_argument_group("material (overrides the file's settings)")
+    for flag, what in (("--eta-film", "film index η₂"), ("--eta-base", "base index η₃"),
+                       ("--eta-outer", "outer index η₁")):
+        g.add_argument(flag, metavar="N|NAME|FILE",
+                       help=f"{what}: a number, a bundled material (SiO2, Si, Si3N4, ...) or "
+                            f"a refractiveindex.info .yml / .csv file")
+    g.add_argument("--kappa-base", dest="kappa_base", type=float, metavar="K",
+                   help="base absorption κ₃ of a numeric --eta-base")
+    g.add_argument("--thickness", type=float, metavar="NM",
+                   help="film thickness (the initial guess if free), nm")
+    g.add_argument("--layers", metavar="MAT:NM,...",
+                   help="a layer stack instead of one film, layer 0 (on top) first, e.g. "
+                        "SiO2:250,Si3N4:80")
+    g.add_argument("--free", nargs="+", metavar="NAME",
+                   help="fitted parameters, e.g. thickness eta_film, or thickness[0] "
+                        "thickness[1] with --layers")
+    parser.set_defaults(usage_error=parser.error)
+
+
+def _overrides(args, obs) -> None:
+    """Apply the command line's material options to the settings `obs` (in place); a bad
+    value is a usage error naming its option."""
+    def usage(msg):
+        err = getattr(args, "usage_error", None)
+        if err is None:
+            raise SystemExit(f"thinfilm-jax fit: error: {msg}")
+        err(msg)
+
+    init = dict(obs.get("initial") or {}) if isinstance(obs.get("initial"), dict) \
+        else obs.get("initial")
+    given = False
+    for k in INDEX_KEYS:
+        v = getattr(args, k, None)
+        if v is not None:
+            try:
+                parse_index(v)
+            except ValueError as e:
+                usage(f"argument --{k.replace('_', '-')}: {e}")
+            init = {} if not isinstance(init, dict) else init
+            init[k] = v
+            given = True
+    for k in ("kappa_base", "thickness"):
+        v = getattr(args, k, None)
+        if v is not None:
+            if not (math.isfinite(v) and v >= 0):
+                usage(f"argument --{k.replace('_', '-')}: must be finite and >= 0, got {v}")
+            init = {} if not isinstance(init, dict) else init
+            init[k] = v
+            given = True
+    layers = getattr(args, "layers", None)
+    if layers is not None:
+        try:
+            parse_layers(layers)
+        except ValueError as e:
+            usage(f"argument --layers: {e}")
+        obs["layers"] = layers
+        if isinstance(init, dict):  # the layers give each material and thickness
+            for k in ("thickness", "eta_film"):
+                if getattr(args, k, None) is not None:
+                    usage(f"argument --{k.replace('_', '-')}: does not apply with --layers")
+                init.pop(k, None)
+        given = True
+    if given:
+        obs["initial"] = init
+    free = getattr(args, "free", None)
+    if free is not None:
+        obs["free"] = list(free)
+
+
 def run_fit_cli(args) -> int:
-    """Entry point of ``thinfilm-jax fit`` (args.observations, args.out, args.overwrite)."""
+    """Entry point of ``thinfilm-jax fit`` (args.observations, args.out, args.overwrite and
+    the material overrides of `add_arguments`, where given)."""
     import numpy as np
 
     path = Path(args.observations)
     out = Path(args.out) if getattr(args, "out", None) else path.with_name(path.stem + ".fit.json")
     check_output(path, out, getattr(args, "overwrite", False))
     obs = read_observations(path)
+    _overrides(args, obs)
     kind = obs.get("kind")
     if kind not in ("patch", "spectrum"):
         _fail(path, f"kind must be 'patch' or 'spectrum', got {kind!r}")
     film_kw, kw = _settings(path, obs, kind)
 
     from ..core._io import write_json
-    from ..core.film import Film
     from ..fit.film_fit import FitOptions, fit_film, fit_spectrum
 
-    initial = Film(**film_kw)
+    try:
+        initial = material_of(film_kw)
+    except ValueError as e:
+        _fail(path, str(e))
+    if "layers" in film_kw:
+        film_kw = {**film_kw, "layers": [{"material": m, "thickness": d}
+                                         for m, d in film_kw["layers"]]}
     sigma = obs.get("sigma")
     if sigma is not None:
         sigma = np.asarray(sigma, float) if isinstance(sigma, list) else \

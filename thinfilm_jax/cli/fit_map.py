@@ -25,6 +25,13 @@ hold is a usage error before the fit: κ₃ > 0 (glTF's metals are a Schlick tin
 dielectrics a real IOR; fit with ``--kappa-base 0`` or leave out ``--gltf``), η₁ ≠ 1, and a
 fitted η₂ map (``--free eta_film``: the extension has one `iridescenceIor`).
 
+Each index (``--eta-film``, ``--eta-base``, ``--eta-outer``) is a number (it stays a
+number) or a material (SPEC §12): a bundled name (``SiO2``, ``Si``, ``Si3N4``, ...) or a
+refractiveindex.info YAML / CSV file; an unknown name or a number out of range is a usage
+error (exit status 2) that lists the bundled names. A material is an index model: the map
+model must take dispersive indices (`fit_patch_map` says so with a one-line error where it
+does not).
+
 Example::
 
     thinfilm-jax fit-map wedge.npy --theta-o 20 --alpha 0.2 --eta-film 1.46 \\
@@ -35,11 +42,52 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
-#: the parser's numeric options are checked by `_checks.check_args` (usage errors)
+#: the parser's numeric options are checked by `_checks.check_args` (usage errors); the
+#: indices by `_index_arg` (they may be materials, so they are stored under other names)
 METHODS = ("filtered", "reference", "ideal")
+#: index option → (attribute of the parsed value, lowest value of a number, lowest excluded)
+INDEX_OPTIONS = {"--eta-film": ("eta_film_index", 1.0, False),
+                 "--eta-base": ("eta_base_index", 0.0, True),
+                 "--eta-outer": ("eta_outer_index", 1.0, False)}
+
+
+class IndexArg(NamedTuple):
+    """An index option as given (`text`) and as parsed (`value`: a number or an index
+    model)."""
+
+    text: str
+    value: Any
+
+    @property
+    def number(self) -> bool:
+        return not callable(self.value)
+
+
+def _index_arg(lo: float, lo_open: bool):
+    """argparse type of an index option: a number in range or a material (`IndexArg`)."""
+    import argparse
+
+    from .fit import parse_index
+
+    def parse(text: str) -> IndexArg:
+        try:
+            v = parse_index(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+        if not callable(v):
+            n = v.real
+            if (n <= lo if lo_open else n < lo) or v.imag < 0:
+                rng = f"{'(' if lo_open else '['}{lo}, inf)"
+                raise argparse.ArgumentTypeError(f"must be a number in {rng} (κ >= 0) or a "
+                                                 f"material, got {text}")
+        return IndexArg(text, v)
+
+    parse.__name__ = "index"  # argparse's "invalid index value" message
+    return parse
 
 
 def add_parser(sub) -> None:
@@ -52,6 +100,8 @@ def add_parser(sub) -> None:
         ...                                   "--eta-base", "1.0"])
         >>> args.free, args.method, args.grid, args.func is run_fit_map_cli
         (['thickness'], 'filtered', 201, True)
+        >>> args.eta_film_index.value, args.eta_outer_index.value
+        (1.33, 1.0)
     """
     import argparse
 
@@ -65,14 +115,19 @@ def add_parser(sub) -> None:
     view.add_argument("--theta-o-map", dest="theta_o_map", metavar="FILE.npy",
                       help="per-pixel view angles (H, W), degrees")
     p.add_argument("--alpha", type=float, required=True, help="GGX roughness α in (0, 1]")
-    p.add_argument("--eta-film", dest="eta_film", type=float, required=True,
-                   help="film IOR η₂ (fixed, or the initial value with --free ... eta_film)")
-    p.add_argument("--eta-base", dest="eta_base", type=float, required=True,
-                   help="base IOR η₃ (1.0: a free-standing soap film)")
+    mat = " (a number, a bundled material such as SiO2, Si, or a .yml / .csv file)"
+    p.add_argument("--eta-film", dest="eta_film_index", type=_index_arg(1.0, False),
+                   required=True, metavar="N|NAME|FILE",
+                   help="film IOR η₂ (fixed, or the initial value with --free ... eta_film)"
+                        + mat)
+    p.add_argument("--eta-base", dest="eta_base_index", type=_index_arg(0.0, True),
+                   required=True, metavar="N|NAME|FILE",
+                   help="base IOR η₃ (1.0: a free-standing soap film)" + mat)
     p.add_argument("--kappa-base", dest="kappa_base", type=float, default=0.0,
-                   help="base absorption κ₃ (0)")
-    p.add_argument("--eta-outer", dest="eta_outer", type=float, default=1.0,
-                   help="outer IOR η₁ (1)")
+                   help="base absorption κ₃ of a numeric --eta-base (0)")
+    p.add_argument("--eta-outer", dest="eta_outer_index", type=_index_arg(1.0, False),
+                   default=IndexArg("1.0", 1.0), metavar="N|NAME|FILE",
+                   help="outer IOR η₁ (1)" + mat)
     p.add_argument("--free", nargs="+", choices=["thickness", "eta_film"],
                    default=["thickness"], help="fitted fields (default: thickness)")
     p.add_argument("--smoothness", type=float, metavar="NM",
@@ -167,16 +222,37 @@ def _gltf_problem(args) -> str | None:
     gltf = Path(args.gltf)
     if gltf.exists() and not gltf.is_dir():
         return f"{gltf} exists and is not a folder"
-    from ..core.film import Film
     from ..interop.gltf import film_to_gltf
 
+    materials = [f"{flag} {getattr(args, a).text}" for flag, (a, _, _) in INDEX_OPTIONS.items()
+                 if not getattr(args, a).number]
+    if materials:
+        return (f"glTF holds constant IORs, not the dispersive index of "
+                f"{', '.join(materials)} (give numbers)")
     try:  # the film's scalar fields, as the written material will hold them
-        film_to_gltf(Film(0.0, args.eta_film, args.eta_base, args.kappa_base, args.eta_outer))
+        film_to_gltf(_film(args, 0.0))
     except ValueError as e:
         hint = (" — fit with --kappa-base 0 or leave out --gltf"
                 if args.kappa_base > 0 else "")
         return f"{e}{hint}"
     return None
+
+
+def _index_json(arg: IndexArg):
+    """An index option for the JSON summary: a real number, {"n", "k"} of a complex one, or
+    the material as given (a name or a path)."""
+    if not arg.number:
+        return arg.text
+    v = complex(arg.value)
+    return v.real if v.imag == 0 else {"n": v.real, "k": v.imag}
+
+
+def _film(args, thickness):
+    """The `Film` of the command line's indices (numbers or index models) at `thickness`."""
+    from ..core.film import Film
+
+    return Film(thickness, args.eta_film_index.value, args.eta_base_index.value,
+                args.kappa_base, args.eta_outer_index.value)
 
 
 def run_fit_map_cli(args) -> int:
@@ -200,12 +276,10 @@ def run_fit_map_cli(args) -> int:
     if args.devices is not None:
         _devices(args)
     _enable_x64()
-    from ..core.film import Film
     from ..fit.thickness_map import fit_patch_map
     from ..spectral.spectra import get_observer
 
-    initial = Film(0.5 * (lo + hi), args.eta_film, args.eta_base, args.kappa_base,
-                   args.eta_outer)
+    initial = _film(args, 0.5 * (lo + hi))
     kw = dict(alpha=args.alpha, initial=initial, free=tuple(args.free), method=args.method,
               sigma=args.sigma, smoothness_nm=args.smoothness,
               bounds={"thickness": (lo, hi)}, grid=args.grid, observer=args.observer,
@@ -232,8 +306,9 @@ def run_fit_map_cli(args) -> int:
     if "eta_film" in args.free:
         eta = np.asarray(res.eta_film)
         atomic_write(out / "eta_film_map.npy", lambda tmp: np.save(tmp, eta))
-    title = (f"{Path(args.image).name}: {h}×{w}, α={args.alpha:g}, η₂={args.eta_film:g},\n"
-             f"η₃={args.eta_base:g}+{args.kappa_base:g}i, method={args.method}, "
+    title = (f"{Path(args.image).name}: {h}×{w}, α={args.alpha:g}, "
+             f"η₂={args.eta_film_index.text},\n"
+             f"η₃={args.eta_base_index.text}+{args.kappa_base:g}i, method={args.method}, "
              f"τ={args.smoothness if args.smoothness else 'none'} nm")
     _save_png(out / "thickness_map.png", d, title)
     gltf = None
@@ -242,8 +317,7 @@ def run_fit_map_cli(args) -> int:
 
         gdir = Path(args.gltf)
         gdir.mkdir(parents=True, exist_ok=True)
-        doc = write_gltf(gdir / "fit_map.gltf", Film(d, args.eta_film, args.eta_base,
-                                                     args.kappa_base, args.eta_outer),
+        doc = write_gltf(gdir / "fit_map.gltf", _film(args, d),
                          alpha=args.alpha, bits=args.gltf_bits)
         ext = doc["materials"][0]["extensions"][EXTENSION]
         gltf = {"folder": str(gdir), "files": ["fit_map.gltf", doc["buffers"][0]["uri"],
@@ -254,7 +328,8 @@ def run_fit_map_cli(args) -> int:
     pct = (5, 25, 50, 75, 95)
     summary = {
         "image": str(args.image), "shape": [h, w],
-        "settings": {k: getattr(args, k) for k in (
+        "settings": {k: (_index_json(getattr(args, k + "_index")) if k.startswith("eta_")
+                         else getattr(args, k)) for k in (
             "theta_o", "theta_o_map", "alpha", "eta_film", "eta_base", "kappa_base",
             "eta_outer", "free", "smoothness", "sigma", "thickness_range", "grid", "method",
             "observer", "chunk", "devices", "gltf", "gltf_bits")},

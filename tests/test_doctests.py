@@ -25,6 +25,8 @@ NO_EXAMPLES = {
     "thinfilm_jax.studies.bench": "the driver of `thinfilm-jax bench`: each function runs or "
                                   "reports the whole benchmark (minutes; "
                                   "tests/studies/test_bench_smoke.py)",
+    "thinfilm_jax.studies.stack_bench": "a benchmark script against installed peers (tmm, "
+                                        "tmm_fast, tmmax in subprocesses): run as a module",
     "thinfilm_jax.studies.scaling": "the device-scaling driver: it spawns one subprocess per "
                                     "device count and times the large jobs (minutes)",
     "thinfilm_jax.studies.coverage": "a seeded study script: its functions are undocumented "

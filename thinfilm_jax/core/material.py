@@ -10,6 +10,13 @@ broadcast with the shading points (as before), a `Stack`'s ``thickness`` (..., N
 leading batch axes while its indices are shared by every point (vmap over several stacks).
 `point_split` flattens the per-point part for `jax.lax.map` and rebuilds one point's material,
 with no positional unpacking of fields.
+
+Example:
+    >>> from thinfilm_jax import Film, Stack, ConstantIndex
+    >>> needs_stack(Film(600.0, 1.3, 2.0)), needs_stack(Film(600.0, ConstantIndex(1.3), 2.0))
+    (False, True)
+    >>> batch_shape(Stack([[100.0, 50.0]] * 3, (1.46, 2.0), 3.9))
+    (3,)
 """
 
 from __future__ import annotations

@@ -10,6 +10,15 @@ Two problems, one machinery:
 Both minimise $\tfrac12\sum_k r_k^2$ with weighted residuals $r_k = (m_k(x) - o_k)/\sigma_k$
 (σ = 1 unless given) with optimistix (`optx.least_squares`, Levenberg–Marquardt by default).
 
+**Materials (SPEC §12).** `initial` is a constant `Film` (the Airy model, the names
+`PARAMS`), a `Film` with index models or a `Stack`: the model is then the stack code with
+every index at each wavelength, and a free parameter is any real scalar of the material
+named by its pytree path, e.g. ``"thickness[1]"`` or ``"eta_film.coefficients[0]"``
+(`params`: names, default boxes, the rebuild of the material from the free values). With
+several free layer thicknesses the screen below is a product grid, one axis per layer
+(`DEFAULT_N_STARTS_LAYERS`), with 8 short solves per free layer, and the fringe-order moves
+step each layer alone by its own order Δd_i = λ̄ / (2 n_i ⟨cos θ_i⟩).
+
 **Bounded parameters.** Every free parameter lives in a box [lo, hi] (`DEFAULT_BOUNDS`,
 overridable with `FitOptions.bounds`) and is solved for in an unconstrained variable y with
 
@@ -118,8 +127,8 @@ from .options import (_PATCH_ONLY, _START_MARGIN, BATCHING, DEFAULT_BOUNDS, DEFA
                       DEFAULT_N_STARTS_LAYERS, FILM_PARAMS, PARAMS, SOLVERS, FitOptions,
                       FitResult)
 
-__all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "FitOptions", "FitResult", "SOLVERS", "fit_film",
-           "fit_spectrum", "patch_model", "spectrum_model"]
+__all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "PARAMS", "FitOptions", "FitResult", "SOLVERS",
+           "fit_film", "fit_spectrum", "patch_model", "spectrum_model"]
 
 # ----------------------------------------------------------------------------- forward models
 def _traced_stack(material) -> Stack:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 
 from ._checks import _add_device_options, _devices, _enable_x64
@@ -322,9 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
     ft = sub.add_parser("fit", help="fit film parameters to observed patch colours or spectra",
                         description=fit_cli.__doc__,
                         formatter_class=argparse.RawDescriptionHelpFormatter)
-    ft.add_argument("observations", help="CSV or JSON file of observations")
-    ft.add_argument("--out", required=False, help="result JSON path")
-    ft.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    fit_cli.add_arguments(ft)
     ft.set_defaults(func=_fit)
 
     from . import fit_map as fit_map_cli

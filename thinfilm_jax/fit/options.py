@@ -11,7 +11,6 @@ import dataclasses
 import functools
 from typing import NamedTuple
 
-import jax
 import numpy as np
 import optimistix as optx
 from jax import Array

@@ -51,8 +51,14 @@ from jax import Array
 
 from ..core import _validate as V
 from ..core.film import Film
+from ..core.material import batch_shape, needs_stack
+from ..core.methods import METHODS as METHOD_INFO
+from ..core.methods import require
+from ..core.stack import Stack
+from ..optics.index import index_at
 from ..realtime.options import ModelOptions
-from ..shading.patch import METHODS, patch_one
+from ..shading.patch import METHODS, patch_one, stack_patch_one
+from ..spectral.reflectance import band_centroids, band_film
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 
 __all__ = ["MapResult", "fit_envmap_map", "fit_patch_map", "render_patch_map"]
@@ -92,7 +98,7 @@ def render_patch_map(film: Film, theta_o, alpha, *, method: str = "filtered",
     theta_o = jnp.asarray(theta_o)
     dt = theta_o.dtype if jnp.issubdtype(theta_o.dtype, jnp.floating) else float
     shape = np.broadcast_shapes(theta_o.shape, *(np.shape(v) for v in film))
-    f = Film(*(jnp.broadcast_to(jnp.asarray(v, dt), shape) for v in film))
+    f = jax.tree.map(lambda v: jnp.broadcast_to(jnp.asarray(v, dt), shape), film)
     theta_o = jnp.broadcast_to(theta_o.astype(dt), shape)
     model = _pixel_model(method, observer, options, float(alpha))
     out = _render_flat(tuple(v.reshape(-1) for v in (*f, theta_o)), model)
@@ -387,18 +393,73 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
     if np.ndim(alpha) != 0:
         raise ValueError(f"alpha must be a scalar, got shape {np.shape(alpha)}")
     V.check_range("alpha", float(alpha), 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-    initial = V.check_film(initial, "initial")
-    if np.shape(initial.thickness) != () or any(np.ndim(v) for v in initial):
-        raise ValueError("initial must be a Film with scalar fields")
-    model = _pixel_model(method, observer, options, float(alpha))
-    ctx = tuple(jnp.asarray(float(v)) for v in (initial.eta_base, initial.kappa_base,
-                                                initial.eta_outer))
+    if needs_stack(initial):
+        model, ctx, eta0 = _material_pixel_model(initial, free, method, observer, options,
+                                                 float(alpha))
+    else:
+        initial = V.check_film(initial, "initial")
+        if np.shape(initial.thickness) != () or any(np.ndim(v) for v in initial):
+            raise ValueError("initial must be a Film with scalar fields")
+        model = _pixel_model(method, observer, options, float(alpha))
+        ctx = tuple(jnp.asarray(float(v)) for v in (initial.eta_base, initial.kappa_base,
+                                                    initial.eta_outer))
+        eta0 = float(initial.eta_film)
     return _fit_map(image.reshape(-1, n_bands), theta.reshape(-1), ctx, model,
                     np.ones((h, w), bool),
-                    eta0=float(initial.eta_film), free=free, sigma=float(sigma),
+                    eta0=eta0, free=free, sigma=float(sigma),
                     smoothness_nm=smoothness_nm, bounds=b, grid=grid, eta_grid=eta_grid,
                     steps=steps, sweeps=sweeps, chunk=chunk, devices=devices,
                     progress=progress)
+
+
+def _material_pixel_model(initial, free, method, observer, options, alpha):
+    """(model, ctx, η₂ reported) of a dispersive single film (SPEC §12): the exact methods and
+    `ideal` run the stack code per pixel (`patch.stack_patch_one`, ctx = the one-layer
+    stack); the other real-time ones each band with the film at its centroid wavelength
+    (`spectral.reflectance.band_film`, ctx = the band films' indices (J,) each)."""
+    require(method, dispersive=True, stack=isinstance(initial, Stack))
+    if isinstance(initial, Stack) and initial.n_layers > 1:
+        raise ValueError("a thickness map fits one film: initial must be a Film (or a "
+                         "one-layer Stack); fit a multi-layer stack with fit_film/fit_spectrum")
+    if "eta_film" in free:
+        raise ValueError("free='eta_film' needs a constant film index: this film's index is a "
+                         "model (free its parameters with fit_film)")
+    exact = METHOD_INFO[method].exact or method == "ideal"
+    stack = V.check_material(initial, "initial", wavelengths=(
+        get_observer(observer).wavelengths if exact else band_centroids(observer)))
+    if batch_shape(stack) != ():
+        raise ValueError("initial must have a scalar thickness (the map's start)")
+    eta0 = float(np.real(np.asarray(index_at(stack.eta[0], np.float64(550.0)))))
+    if exact:
+        return _stack_pixel_model(method, observer, options.quadrature, options.ndf,
+                                  alpha), stack, eta0
+    bf = band_film(initial if isinstance(initial, Film) else Film(
+        0.0, stack.eta[0], stack.eta_base, 0.0, stack.eta_outer), observer)
+    n_bands = len(band_centroids(observer))
+    ctx = tuple(jnp.broadcast_to(jnp.asarray(v, float), (n_bands,))
+                for v in (bf.eta_film, bf.eta_base, bf.kappa_base, bf.eta_outer))
+    return _band_pixel_model(method, observer, options, alpha), ctx, eta0
+
+
+@functools.lru_cache(maxsize=32)
+def _stack_pixel_model(method, observer, quadrature, ndf, alpha):
+    """model(x = (d, ·), θ_o, ctx = the one-layer stack) → (J,): exact per pixel."""
+    def model(x, theta, ctx):
+        return stack_patch_one(ctx._replace(thickness=x[:1]), theta, alpha, method=method,
+                               observer=observer, quadrature=quadrature, ndf=ndf)
+    return model
+
+
+@functools.lru_cache(maxsize=32)
+def _band_pixel_model(method, observer, options, alpha):
+    """model(x = (d, ·), θ_o, ctx = (η₂, η₃, κ₃, η₁) of the J band films) → (J,): band j from
+    the film at band j's centroid (the real-time methods' approximation of dispersion)."""
+    def model(x, theta, ctx):
+        def band(e2, e3, k3, e1):
+            return patch_one(Film(x[0], e2, e3, k3, e1), theta, alpha, method=method,
+                             observer=observer, options=options)
+        return jnp.diagonal(jax.vmap(band)(*ctx))
+    return model
 
 
 @functools.lru_cache(maxsize=32)

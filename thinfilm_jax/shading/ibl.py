@@ -66,7 +66,7 @@ from ..realtime.improved import BinTable, bin_bands, bin_table, lookup_bins, sca
 from ..realtime.filtered import split_by_light
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..spectral.khr import khr_bands
-from ..spectral.lut import build_shat_lut
+from ..spectral.lut import ShatLUT, build_shat_lut
 from ..realtime.options import ModelOptions, check_options
 from .prefilter import (PrefilteredEnvMap, bin_radiance_parts, lookup_albedo, lookup_prefiltered,
                         lookup_radiance, moments_to_mean_cov, prefilter_envmap)

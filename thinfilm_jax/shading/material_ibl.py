@@ -55,7 +55,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..brdf import material as M
-from ..brdf.ndf import walter_alpha
 from ..core import _validate as V
 from ..optics.airy import choose_arithmetic
 from ..spectral.reflectance import spectral_bands

@@ -169,14 +169,23 @@ def _stack_patch_jit(stack, theta_o, alpha, cfg, shape):
 
     def one(xs):
         ti, tho, a = xs
-        quad = patch_quadrature(tho, a, quadrature=quadrature, ndf=ndf)
-        if method == "ideal":  # A(θ_o, α) · R_j(cos θ_o), the exact bands at h = n
-            return jnp.sum(quad.weight) * stack_bands(point(ti), jnp.cos(tho), observer)
-        rj = stack_bands(point(ti), quad.cos_hi, observer)  # (N, J)
-        return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
+        return stack_patch_one(point(ti), tho, a, method=method, observer=observer,
+                               quadrature=quadrature, ndf=ndf)
 
     out = jax.lax.map(one, (t.astype(dtype), th, al), batch_size=min(batch, max(th.shape[0], 1)))
     return out.reshape(*shape, out.shape[-1])
+
+
+def stack_patch_one(stack: Stack, theta_o, alpha, *, method: str, observer: str,
+                    quadrature=ModelOptions().quadrature, ndf: str = "ggx") -> Array:
+    """One patch of a `Stack` (one point: thickness (N,), scalar θ_o and α) → (J,): the
+    `reference` quadrature of the exact stack bands, or `ideal`'s A(θ_o, α) · R_j(cos θ_o)
+    (the exact bands at h = n). No validation (trace-safe)."""
+    quad = patch_quadrature(theta_o, alpha, quadrature=quadrature, ndf=ndf)
+    if method == "ideal":
+        return jnp.sum(quad.weight) * stack_bands(stack, jnp.cos(theta_o), observer)
+    rj = stack_bands(stack, quad.cos_hi, observer)  # (N, J)
+    return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
 
 
 def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,

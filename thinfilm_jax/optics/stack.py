@@ -232,8 +232,16 @@ def stack_transmittance_traced(stack: Stack, cos_theta, wavelength,
 
 
 def _traced_args(stack, wavelength, polarisation, layers):
-    etas = tuple(index_at(e, wavelength) if is_index_model(e) else e
-                 for e in (stack.eta_outer, *stack.eta, stack.eta_base))
+    seen: dict[int, Array] = {}  # one evaluation per model object (outside jit: per material)
+
+    def at(e):
+        if not is_index_model(e):
+            return e
+        if id(e) not in seen:
+            seen[id(e)] = index_at(e, wavelength)
+        return seen[id(e)]
+
+    etas = tuple(at(e) for e in (stack.eta_outer, *stack.eta, stack.eta_base))
     pols = ("s", "p") if polarisation == "unpolarised" else (polarisation,)
     layers = "scan" if layers == "auto" else layers
     return jnp.asarray(stack.thickness), etas, pols, layers

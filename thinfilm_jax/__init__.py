@@ -92,8 +92,8 @@ from .brdf.carpaint import PAINTS as PAINTS
 from .shading.carpaint_ibl import paint_envmap_radiance as paint_envmap_radiance
 from .shading.carpaint_ibl import paint_patch_radiance as paint_patch_radiance
 from .spectral.khr import khr_reflectance as khr_reflectance
-from .spectral.khr import bands_to_rec709 as bands_to_rec709
-from .spectral.khr import rec709_to_bands as rec709_to_bands
+from .spectral.colorimetry import bands_to_rec709 as bands_to_rec709
+from .spectral.colorimetry import rec709_to_bands as rec709_to_bands
 from .spectral.reflectance import rgb_reflectance as rgb_reflectance
 from .optics.series import SeriesTerms as SeriesTerms
 from .shading.sources import Sources as Sources

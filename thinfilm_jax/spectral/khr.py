@@ -43,8 +43,15 @@ is neither the Schlick base nor grey: it is C₀ + 2𝐒(0)(C₁ cos φ + C₂ c
 R₁₂₃ ≥ 10⁻⁵ keeps a film matched to the outer medium (η₂ = η₁) from vanishing.
 
 To and from the library's bands (the whites differ: D65 here, the equal-energy mirror there):
-`rec709_to_bands` and its inverse `bands_to_rec709` (CAT02 von Kries between the two whites;
-a flat reflectance R is RGB (R, R, R) and bands (R, R, R)).
+the library's one conversion, `colorimetry.rec709_to_bands` and its inverse
+`colorimetry.bands_to_rec709` (ITU-R BT.709 primaries, CAT02 von Kries between the two whites;
+a flat reflectance R is RGB (R, R, R) and bands (R, R, R)), re-exported here. It reads the
+RGB with BT.709's matrix derived from D65's chromaticity (0.3127, 0.3290), which differs from
+the extension's printed matrix (white Z = 1.08883) by ≤ 5.2·10⁻⁴: against reading it back
+with the printed matrix, `khr`'s outputs move by ≤ 2·10⁻⁵ per band and their ΔE₀₀ to the
+exact film by ≤ 0.002 (the films of tests/spectral/test_khr.py). ΔE against the exact film:
+`delta_e_to_exact` (CIE 1931 2°) or `colorimetry.delta_e2000_rec709` (any observer), the
+convention of every study.
 
 Implementation notes: the base IOR is kept as the ratio (1 + s)/(1 − s), s = √(F₀ + 10⁻⁴),
 and R₂₃'s normal reflectance is computed as ((1 + s) − η₂(1 − s))²/((1 + s) + η₂(1 − s))²,
@@ -77,8 +84,9 @@ from jax import Array
 from ..core import _validate as V
 from ..core.film import Film
 from ..optics.fresnel import fresnel_schlick, normal_reflectance, safe_sqrt
-from .colorimetry import band_to_xyz_matrix, delta_e2000
-from .spectra import DEFAULT_OBSERVER
+from .colorimetry import CIE_1931, delta_e2000_rec709
+from .colorimetry import bands_to_rec709 as bands_to_rec709  # re-exported (module docstring)
+from .colorimetry import rec709_to_bands as rec709_to_bands
 
 #: XYZ → linear Rec. 709 RGB as printed by the extension (row-major here; the GLSL `mat3` is
 #: column-major). Checked against the primaries and D65 in tests/spectral/test_khr.py.
@@ -185,102 +193,19 @@ def _khr_jit(film, cos_theta):
     return khr_bands(*jax.tree.unflatten(tree, jnp.broadcast_arrays(*leaves)))
 
 
-#: Rec. 709 (D65) → XYZ: the inverse of the extension's matrix (white (0.95047, 1, 1.08883)).
-REC709_TO_XYZ = np.linalg.inv(XYZ_TO_REC709)
-
-
-def _white_matrices(observer):
-    """(T, W_D65, W_E): the bands' 3×3 T of `observer`, the extension's white M·(1, 1, 1) and
-    the bands' white T·(1, 1, 1) (host float64)."""
-    t = band_to_xyz_matrix(observer)
-    return t, REC709_TO_XYZ.sum(axis=1), t.sum(axis=1)
-
-
-def _check_last_axis(name, x, n):
-    if x.ndim < 1 or x.shape[-1] != n:
-        raise ValueError(f"{name} must have a last axis of length {n}, got shape {x.shape}")
-
-
-def rec709_to_bands(rgb, observer: str = DEFAULT_OBSERVER) -> np.ndarray:
-    r"""`khr` linear Rec. 709 RGB (..., 3) as the band values of `observer` (host, NumPy).
-
-    The extension's white is D65 (a flat reflectance is RGB (1, 1, 1)), the bands' is the
-    perfect mirror under equal-energy light; the map takes one white to the other:
-
-    $$ \mathbf b = T^{-1} K\, M\, \mathbf c,\qquad
-       K = M_{\rm CAT02}^{-1}\operatorname{diag}\!\Big(\frac{M_{\rm CAT02}W_E}
-           {M_{\rm CAT02}W_{D65}}\Big) M_{\rm CAT02}, $$
-
-    with 𝐜 the RGB, M = `REC709_TO_XYZ` (the inverse of the extension's printed matrix),
-    T = `colorimetry.band_to_xyz_matrix(observer)` (XYZ = T 𝐛), W_D65 = M·(1, 1, 1) and
-    W_E = T·(1, 1, 1) (Y = 1), and K the von Kries adaptation with full adaptation (D = 1) in
-    the cone space of CAT02 (CIE 159:2004, CIECAM02; Moroney et al. 2002, "The CIECAM02 color
-    appearance model", IS&T/SID CIC 10), computed by colour-science's
-    `chromatic_adaptation_VonKries(..., transform="CAT02")`. K W_D65 = W_E, so a flat
-    reflectance maps to itself: RGB (R, R, R) → bands (R, R, R), whatever the observer.
-    The inverse map is `bands_to_rec709`.
-
-    Example (flat stays flat; a non-grey colour changes):
-        >>> import numpy as np
-        >>> np.round(rec709_to_bands(np.full(3, 0.3), "cie_1931_2"), 12).tolist()
-        [0.3, 0.3, 0.3]
-        >>> bool(np.ptp(rec709_to_bands(np.array([0.3, 0.2, 0.1]), "cie_1931_2")) > 0.05)
-        True
-    """
-    import colour
-
-    rgb = np.asarray(rgb, float)
-    _check_last_axis("rgb", rgb, 3)
-    t, white_d65, white_e = _white_matrices(observer)
-    xyz = rgb @ REC709_TO_XYZ.T
-    adapted = colour.adaptation.chromatic_adaptation_VonKries(
-        xyz, white_d65, white_e, transform="CAT02")
-    return adapted @ np.linalg.inv(t).T
-
-
-def bands_to_rec709(values, observer: str = DEFAULT_OBSERVER) -> np.ndarray:
-    r"""Band values (..., 3) of `observer` as the extension's linear Rec. 709 RGB (host,
-    NumPy): the inverse of `rec709_to_bands`,
-
-    $$ \mathbf c = M^{-1} K^{-1}\, T\, \mathbf b, $$
-
-    M⁻¹ = `XYZ_TO_REC709` (the extension's matrix) and K⁻¹ the CAT02 von Kries adaptation
-    from W_E back to W_D65 (the diagonal ratios inverted; notation of `rec709_to_bands`). The
-    perfect mirror (bands 1, 1, 1) is RGB (1, 1, 1); the round trip is the identity to
-    rounding (measured ≤ 3e-15 on [0, 1.2]³).
-
-    Example (flat stays flat, and back):
-        >>> import numpy as np
-        >>> np.round(bands_to_rec709(np.full(3, 0.3), "cie_1931_2"), 12).tolist()
-        [0.3, 0.3, 0.3]
-        >>> c = np.array([0.3, 0.2, 0.1])
-        >>> bool(np.abs(bands_to_rec709(rec709_to_bands(c)) - c).max() < 1e-14)
-        True
-    """
-    import colour
-
-    values = np.asarray(values, float)
-    _check_last_axis("values", values, 3)
-    t, white_d65, white_e = _white_matrices(observer)
-    adapted = colour.adaptation.chromatic_adaptation_VonKries(
-        values @ t.T, white_e, white_d65, transform="CAT02")
-    return adapted @ XYZ_TO_REC709.T
-
-
 def delta_e_to_exact(khr_rgb, exact_xyz_bands) -> np.ndarray:
     """CIEDE2000 between `khr` output (..., 3) and the exact CIE 1931 2° bands (..., 3) of
     ``rgb_reflectance(film, c, method="spectral", observer="cie_1931_2")`` (host, NumPy).
 
     The two have different whites: the exact bands take the perfect mirror (equal-energy
-    light) as white, the extension maps a flat reflectance to RGB (1, 1, 1), i.e. D65. The
-    `khr` RGB is taken to the CIE 1931 bands by `rec709_to_bands` (XYZ by `REC709_TO_XYZ`,
-    CAT02 from D65 to the equal-energy white) and compared in Lab with the mirror as white
-    (`colorimetry.delta_e2000`, CIE 1931 observer): a flat reflectance R gives ΔE = 0 in
-    both conventions.
+    light) as white, the extension maps a flat reflectance to RGB (1, 1, 1), i.e. D65. This is
+    ``colorimetry.delta_e2000_rec709(khr_rgb, exact_xyz_bands, "cie_1931_2")``, the library's
+    one convention (SPEC §7): the RGB taken to the bands by `rec709_to_bands` (CAT02 from D65
+    to the equal-energy white), both compared in CIELAB with the mirror as white, so a flat
+    reflectance R gives ΔE = 0.
 
     Example (a perfect mirror in both conventions):
-        >>> float(delta_e_to_exact(np.ones(3), np.ones(3)))
-        0.0
+        >>> float(delta_e_to_exact(np.ones(3), np.ones(3))) < 1e-9
+        True
     """
-    as_bands = rec709_to_bands(khr_rgb, "cie_1931_2")
-    return delta_e2000(as_bands, exact_xyz_bands, observer="cie_1931_2")
+    return delta_e2000_rec709(khr_rgb, exact_xyz_bands, CIE_1931)

@@ -21,10 +21,11 @@ Three measurements (`run_models_bench`; the default run writes figures/models.js
    (`material_envmap_radiance`, cross bands R_jk = `envmap_radiance(method="reference")`).
 
 ΔE: CIEDE2000 with the perfect mirror as white (`colorimetry.delta_e2000`) between band
-values; `khr` returns linear Rec. 709 (SPEC §10), so its rows convert the reference's bands
-to linear Rec. 709 (CIE 1964 XYZ, CAT02 from the mirror white to D65) and compare both in
-CIELAB with the D65 white: in both the mirror is RGB (1, 1, 1). Statistics over θ_o ∈ [0°,
-85°] and α ∈ {0.1, 0.3, 0.6}: mean and 95th percentile. Cost: the warm time of one call
+values, the convention of every study (SPEC §7); `khr` returns linear Rec. 709 (SPEC §10), so
+its rows take it to the reference's bands first (`colorimetry.delta_e2000_rec709`:
+`rec709_to_bands`, CAT02 from D65 to the mirror's white) and compare in the same CIELAB as
+every other row. Statistics over θ_o ∈ [0°, 85°] and α ∈ {0.1, 0.3, 0.6}: mean and 95th
+percentile. Cost: the warm time of one call
 divided by its shading points (median of `repeats`; wall clock on a shared machine, noisy).
 
 Example (the configuration of the smoke test; the run itself takes seconds to minutes):
@@ -52,7 +53,7 @@ from ..shading.material_ibl import material_envmap_radiance
 from ..shading.material_patch import material_patch_radiance
 from ..shading.patch import patch_radiance
 from ..shading.prefilter import prefilter_envmap
-from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000, white_xy
+from ..spectral.colorimetry import bands_to_srgb, delta_e2000, delta_e2000_rec709
 from ..spectral.reflectance import rgb_reflectance
 from ._timing import environment, jsonable, time_call
 
@@ -132,37 +133,10 @@ def _stats(de) -> dict:
             "dE2000_max": float(np.max(de)), "n": int(de.size)}
 
 
-def _bands_to_rec709(values):
-    """Linear Rec. 709 of band values: mirror → (1, 1, 1) (CAT02 mirror white → D65).
-
-    colour-science's ITU-R BT.709 space, the one `delta_e_rec709` reads back: its matrix is
-    derived from D65's chromaticity (0.3127, 0.3290), not the extension's printed matrix
-    (white (0.95047, 1, 1.08883)) that `khr.bands_to_rec709` inverts exactly: the two differ
-    by ≤ 1.9e-4 per channel for bands in [0, 1]³ (flat bands agree to 1e-15), ΔE ≤ 0.006
-    (2000 random bands in [0, 1.2]³), ≤ 0.002 on the khr rows' ΔE per point (the films of
-    tests/spectral/test_khr.py)."""
-    import colour
-
-    cs = colour.RGB_COLOURSPACES["ITU-R BT.709"]
-    return np.asarray(colour.XYZ_to_RGB(bands_to_xyz(values), cs, illuminant=white_xy(),
-                                        chromatic_adaptation_transform="CAT02",
-                                        apply_cctf_encoding=False))
-
-
-def delta_e_rec709(rgb_a, rgb_b) -> np.ndarray:
-    """CIEDE2000 between linear Rec. 709 values, CIELAB with the D65 white."""
-    import colour
-
-    cs = colour.RGB_COLOURSPACES["ITU-R BT.709"]
-    lab = [colour.XYZ_to_Lab(colour.RGB_to_XYZ(np.asarray(x, float), cs,
-                                               apply_cctf_decoding=False),
-                             illuminant=cs.whitepoint) for x in (rgb_a, rgb_b)]
-    return np.asarray(colour.delta_E(lab[0], lab[1], method="CIE 2000"))
-
-
-def _de(method, test, ref):
-    return delta_e_rec709(test, _bands_to_rec709(ref)) if method == "khr" \
-        else delta_e2000(test, ref)
+def delta_e(method: str, test, ref) -> np.ndarray:
+    """ΔE₀₀ of `method`'s values against the reference's bands (module docstring): `khr`'s
+    linear Rec. 709 by `colorimetry.delta_e2000_rec709`, the others by `delta_e2000`."""
+    return delta_e2000_rec709(test, ref) if method == "khr" else delta_e2000(test, ref)
 
 
 def _timed(fn, args, repeats, points):
@@ -229,7 +203,7 @@ def film_method_rows(cfg: ModelsConfig, log=print):
             out, c, _ = _timed(lambda f, t, x, m=m: patch_radiance(f, t, x, method=m),
                                (film, th, al), cfg.repeats, npts)
             keep[(gname, m)] = out
-            rows.append({"grid": gname, "method": m, **_stats(_de(m, out, ref)),
+            rows.append({"grid": gname, "method": m, **_stats(delta_e(m, out, ref)),
                          "warm_s_per_point": c})
             log(f"method {gname:40s} {m:9s} ΔE mean {rows[-1]['dE2000_mean']:.2f}")
     return rows, keep
@@ -275,7 +249,7 @@ def ibl_rows(cfg: ModelsConfig, log=print):
                                    len(n))
                 keep[(map_name, fname, name)] = out
                 rows.append({"map": map_name, "film": fname, "method": name,
-                             **_stats(_de(name, out, ref)), "warm_s_per_point": c})
+                             **_stats(delta_e(name, out, ref)), "warm_s_per_point": c})
                 log(f"ibl {map_name:14s} {fname:18s} {name:40s} "
                     f"ΔE mean {rows[-1]['dE2000_mean']:.2f}")
     return rows, keep, (env.shape, cfg.sphere, a)
@@ -314,8 +288,9 @@ def write_markdown(result: dict, path: Path):
         _table(result["film_methods"], ["grid", "method", "dE2000_mean", "dE2000_p95",
                                         "dE2000_max", "warm_s_per_point"],
                ["grid", "method", "ΔE mean", "ΔE p95", "ΔE max", "s/pt"]),
-        "", "`khr` is linear Rec. 709 (SPEC §10): its ΔE compares in CIELAB (D65) with the "
-        "reference's bands converted to linear Rec. 709 (mirror → (1, 1, 1) in both).", "",
+        "", "`khr` is linear Rec. 709 (SPEC §10): its output is taken to the reference's bands "
+        "(`colorimetry.rec709_to_bands`, CAT02 from D65 to the mirror's white) and compared "
+        "like every other row (`colorimetry.delta_e2000_rec709`).", "",
         f"## 3. Under the shipped maps ({', '.join(result['config']['map_names'])}) at "
         f"{result['ibl']['map_shape']} texels, {result['ibl']['sphere']} sphere points, GGX "
         f"α = {result['ibl']['alpha']} (`improved` without the suns split off)", "",

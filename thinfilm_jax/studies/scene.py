@@ -10,11 +10,13 @@ itself in the direction ω (bilinear, `envmap.lookup_bilinear`).
 
 Colour. The map's linear RGB c(ω) is the spectrum Σ_k c_k B_k(λ) of the Mallett–Yuksel
 basis (SPEC §9, `spectral.uplift`); seen in a perfect mirror its band j is
-Σ_k M_jk c_k with M_jk = ∫ S_j B_k dλ (`bands_of_rgb`), so the background and the sphere are
-in the same bands. Every image is kept in the observer's bands (the NPZ) and converted once:
-bands → XYZ (`colorimetry.bands_to_xyz`) → linear sRGB with the mirror white adapted to D65
-(CAT02, colour-science; `bands_to_linear_srgb`, the EXR, unexposed) and → display sRGB
-(`colorimetry.bands_to_srgb` at the exposure, IEC 61966-2-1 encoding, clipped: the PNG).
+Σ_k M_jk c_k with M_jk = ∫ S_j B_k dλ (`colorimetry.uplift_to_bands`), so the background and
+the sphere are in the same bands (`khr`'s Rec. 709 is taken to them by
+`colorimetry.rec709_to_bands`, `render.method_bands`). Every image is kept in the observer's
+bands (the NPZ) and converted once, by the library's one conversion: bands → linear Rec. 709
+= linear sRGB with the mirror white adapted to D65 (CAT02; `colorimetry.bands_to_rec709`, the
+EXR, unexposed) and → display sRGB (`colorimetry.bands_to_srgb` at the exposure, IEC
+61966-2-1 encoding, clipped: the PNG).
 
 Sphere (`--scene sphere`): `envmap_radiance(material, α, n, ω_o, map, method=m)` per pixel
 for each method m; the reference in chunks of `CHUNK` points (a progress bar), on the map
@@ -23,7 +25,7 @@ resampled once as `envmap_radiance(max_height=256)` would resample it
 exact, by the largest power of two f with texel f·π/H ≤ α/8 and H/f ≥ 128: a 1k map
 (512 rows) by 4 to 128 × 256 at α = 0.25); the real-time methods read the map prefiltered
 once (`render.method_map`: `improved` with its suns split off). ΔE₀₀ per pixel against the
-reference, exposure-scaled, mirror white Y = 1 (`colorimetry.delta_e2000`).
+reference, exposure-scaled, mirror white Y = 1 (`colorimetry.delta_e2000`, as every study).
 
 Bubble (`--scene bubble`). A free-standing film (air | η₂ | air, default water,
 `refractive_index("water")`, Daimon & Masumura 2007) on the unit sphere, smooth (a mirror on
@@ -89,10 +91,11 @@ from ..core.methods import require
 from ..core.stack import Stack
 from ..optics.index import is_index_model
 from ..optics.materials import MATERIALS, refractive_index
-from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000, white_xy
+from ..spectral.colorimetry import (bands_to_rec709, bands_to_srgb, bands_to_xyz, delta_e2000,
+                                    uplift_to_bands)
 from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 from ..spectral.uplift import basis_on
-from .render import PANEL_DPI, fit_title, panel_inches
+from .render import PANEL_DPI, fit_title, method_bands, panel_inches
 
 OWN_SCENES = ("sphere", "bubble")
 DISTANCE = 5.0  # camera distance / sphere radius
@@ -220,29 +223,6 @@ def hit_sphere(eye, dirs):
 
 
 # ----------------------------------------------------------------------------- colour
-def rgb_to_band_matrix(observer: str = DEFAULT_OBSERVER) -> np.ndarray:
-    """M (J, 3), M_jk = Σ_i W_ij B_k(λ_i) = ∫ S_j B_k dλ: the bands of the uplifted RGB."""
-    obs = get_observer(observer)
-    b = basis_on(tuple(float(x) for x in obs.wavelengths))
-    return np.asarray(obs.weights, float).T @ b
-
-
-def bands_of_rgb(rgb, observer: str = DEFAULT_OBSERVER) -> np.ndarray:
-    """Band values (…, J) of linear-RGB radiance (…, 3) seen in a perfect mirror (SPEC §9)."""
-    return np.asarray(rgb, float) @ rgb_to_band_matrix(observer).T
-
-
-def bands_to_linear_srgb(values, observer: str = DEFAULT_OBSERVER) -> np.ndarray:
-    """Linear sRGB (Rec. 709 primaries, D65; unclipped, no transfer function) of band values:
-    `colorimetry.xyz_to_srgb`'s conversion without its encoding and clipping (the EXR)."""
-    import colour
-
-    return np.asarray(colour.XYZ_to_sRGB(bands_to_xyz(values, observer),
-                                         illuminant=white_xy(observer),
-                                         chromatic_adaptation_transform="CAT02",
-                                         apply_cctf_encoding=False), float)
-
-
 def exposure_of(values, observer: str) -> float:
     """The display exposure that maps the 99th luminance percentile to 0.9 (as `render`)."""
     y = bands_to_xyz(np.asarray(values).reshape(-1, np.shape(values)[-1]), observer)[:, 1]
@@ -365,7 +345,7 @@ def _frame(cfg: SceneConfig, env):
 def _background(env, dirs, observer):
     from ..shading.envmap import lookup_bilinear
 
-    return bands_of_rgb(np.asarray(lookup_bilinear(env.radiance, dirs)), observer)
+    return uplift_to_bands(np.asarray(lookup_bilinear(env.radiance, dirs)), observer)
 
 
 def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
@@ -375,7 +355,6 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
     from ..shading.envmap import downsample
     from ..shading.ibl import envmap_radiance
     from ..shading.ibl_reference import resample_factor
-    from ..spectral.khr import rec709_to_bands
     from .render import method_map
 
     _, dirs, mask, p, _ = _frame(cfg, env)
@@ -405,8 +384,7 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
             obs = DEFAULT_OBSERVER if m == "khr" else cfg.observer
             out = np.asarray(envmap_radiance(cfg.material, cfg.alpha, n, view, pref, method=m,
                                              observer=obs))
-            if m == "khr":
-                out = rec709_to_bands(out, cfg.observer)
+            out = method_bands(m, out, cfg.observer)
         seconds[m] = time.perf_counter() - t0
         img = np.full(mask.shape + (out.shape[-1],), np.nan)
         img[mask] = out
@@ -538,7 +516,7 @@ def render_scene(cfg: SceneConfig, out_dir=None, progress: bool = True) -> dict:
     files, panels, errors = [], [], {}
     for m, img in images.items():
         full = _full(img, background, mask)
-        files.append(write_exr(out / f"{m}.exr", bands_to_linear_srgb(full, obs)))
+        files.append(write_exr(out / f"{m}.exr", bands_to_rec709(full, obs)))
         srgb = bands_to_srgb(full * exposure, obs)
         files.append(write_png(out / f"{m}.png", srgb))
         panels.append((f"{m}\n{int(mask.sum()) / seconds[m]:,.0f} points/s", srgb))

@@ -28,6 +28,15 @@ module name and timed interleaved with the current ones: before/after in one run
 Run: ``python -m thinfilm_jax.studies.kernel_bench [--out figures] [--quick]
 [--baseline /path/to/old/checkout] [--repeats N]``.
 
+Per-size mode (``--sizes N ...``, `run_size_bench`): the envmap paths only (ideal,
+filtered, improved, and filtered / improved with one sun) at each point count and each
+chunk size ``--batch-sizes B ...`` (`envmap_radiance`'s `batch_size`: the points are shaded
+`B` at a time by ``lax.map``; 0 = its default), all programs interleaved in one run, the
+minimum of ``--repeats`` kept and the load average before each round recorded; prints the
+cost ratios filtered / ideal and improved / filtered (and with the sun) per size. Writes
+``kernel_bench_sizes.json`` / ``.md``; ``--append`` adds the run to those already there.
+E.g. ``--sizes 65536 1048576 3686400`` (3,686,400 = 2560 × 1440, a 1440p frame).
+
 Example (the cost of one fused loop: y = 2x + 1 reads 4 B and writes 4 B of float32 and
 does two flops per point, no transcendental, in one kernel that moves only its inputs and
 outputs):
@@ -124,8 +133,10 @@ def shading_points(n: int, seed: int = 0):
                 normal=jnp.asarray(np.tile([0.0, 0.0, 1.0], (n, 1)), F32))
 
 
-def programs(pkg, pts, pref_np, envmap: bool = True):
-    """{kernel name: (jitted callable, args)} of package `pkg` (this one or a baseline)."""
+def programs(pkg, pts, pref_np, envmap: bool = True, batch_size: int | None = None):
+    """{kernel name: (jitted callable, args)} of package `pkg` (this one or a baseline);
+    `batch_size`: the envmap programs' chunk (`envmap_radiance(batch_size=...)`), None for
+    its default."""
     K = _module(pkg, "realtime.kernels", "kernels")
     I = _module(pkg, "realtime.improved", "improved")  # noqa: E741
     L = _module(pkg, "spectral.lut", "lut")
@@ -143,12 +154,13 @@ def programs(pkg, pts, pref_np, envmap: bool = True):
     if envmap:
         P = _module(pkg, "shading.prefilter", "prefilter")
         ibl = _module(pkg, "shading.ibl", "ibl")
+        kw = {} if batch_size is None else {"batch_size": int(batch_size)}
         pref = P.PrefilteredEnvMap(*(jnp.asarray(x, F32) for x in pref_np[:4]),
                                    L.ShatLUT(*pref_np[4]))
         for method in ("ideal", "filtered", "improved"):
             out[f"envmap {method}"] = (
                 jax.jit(lambda f, a, n, v, p, m=method: ibl.envmap_radiance(
-                    f, a, n, v, p, method=m)),
+                    f, a, n, v, p, method=m, **kw)),
                 (film, pts["alpha"], pts["normal"], pts["wo"], pref))
         S = _module(pkg, "shading.sources", "sources")
         if S is not None:
@@ -158,20 +170,21 @@ def programs(pkg, pts, pref_np, envmap: bool = True):
             for method in ("filtered", "improved"):
                 out[f"envmap {method} + 1 sun"] = (
                     jax.jit(lambda f, a, n, v, p, m=method: ibl.envmap_radiance(
-                        f, a, n, v, p, method=m)),
+                        f, a, n, v, p, method=m, **kw)),
                     (film, pts["alpha"], pts["normal"], pts["wo"], pref._replace(sources=sun)))
     return out
 
 
-def cost_per_point(fn, args, n: int) -> dict:
+def cost_per_point(fn, args, n: int, compiled=None) -> dict:
     """XLA's cost analysis of the compiled `fn(*args)`, divided by the point count, and the
     known trip counts of its while loops (`loops`, in program order). XLA counts a loop's
     body once (HloCostAnalysis::HandleWhile): where `loops` is not empty the figures are
     one step of each loop plus what the loops carry, not the whole run. `io_bytes`: the
     per-point arguments and results (leading axis `n`; the tables, shared by all points,
     left out) per point, the traffic of one fused loop; `fusions`: the XLA
-    kernels of the compiled program (loop bodies counted once)."""
-    compiled = fn.lower(*args).compile()
+    kernels of the compiled program (loop bodies counted once). `compiled`: the program
+    already compiled from ``fn.lower(*args)`` (else compiled here)."""
+    compiled = fn.lower(*args).compile() if compiled is None else compiled
     ca = compiled.cost_analysis()
     ca = ca[0] if isinstance(ca, list) else ca
     text = compiled.as_text()
@@ -313,6 +326,149 @@ def report_markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+# ------------------------------------------------------------------ per-size mode (--sizes)
+SIZE_KERNELS = ("envmap ideal", "envmap filtered", "envmap improved",
+                "envmap filtered + 1 sun", "envmap improved + 1 sun")
+FRAME_1440P = 2560 * 1440  # the shading points of a 1440p frame (Kneiphof et al. 2019, §6)
+#: (name, numerator, denominator) of the cost ratios the sizes table reports; targets ≤ 1.5
+RATIOS = (("filtered / ideal", "envmap filtered", "envmap ideal"),
+          ("improved / filtered", "envmap improved", "envmap filtered"),
+          ("improved+sun / filtered+sun", "envmap improved + 1 sun",
+           "envmap filtered + 1 sun"),
+          ("improved+sun / filtered", "envmap improved + 1 sun", "envmap filtered"))
+RATIO_TARGET = 1.5
+
+
+def _load() -> list | None:
+    import os
+
+    return list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+
+
+def size_ratios(rows: list, key: str = "ns_per_point") -> list:
+    """The `RATIOS` of every (points, batch_size) group of `rows`, from `key`."""
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r["points"], r["batch_size"]), {})[r["kernel"]] = r[key]
+    out = []
+    for (points, batch), t in groups.items():
+        row = {"points": points, "batch_size": batch}
+        for name, num, den in RATIOS:
+            row[name] = t[num] / t[den] if num in t and den in t else None
+        out.append(row)
+    return out
+
+
+def run_size_bench(out="figures", *, sizes=(65536, 2**20, FRAME_1440P), batch_sizes=(None,),
+                   repeats: int = 5, append: bool = False, stem: str = "kernel_bench_sizes",
+                   verbose: bool = True) -> dict:
+    """The envmap paths (`SIZE_KERNELS`) at several point counts and chunk sizes
+    (`envmap_radiance(batch_size=...)`, None: its default), every program timed once per
+    round, rounds interleaved, the minimum of `repeats` kept; the load average before
+    each round is recorded. Writes ``<stem>.json`` / ``.md`` in `out`; with `append` the
+    run is added to the runs already there (one file holds several runs, each < 5 min)."""
+    import json
+
+    import thinfilm_jax as current
+
+    from ..shading.prefilter import prefilter_envmap
+
+    out = Path(out)
+    env = environment()
+    pref = prefilter_envmap("venice_sunset").astype(F32)
+    pref_np = (*pref[:4], tuple(pref.lut))
+    rows, timed = [], []
+    for n in sizes:
+        pts = shading_points(int(n))
+        for b in batch_sizes:
+            progs = programs(current, pts, pref_np, True, b)
+            for name in SIZE_KERNELS:
+                fn, args = progs[name]
+                t0 = time.perf_counter()
+                compiled = fn.lower(*args).compile()
+                compile_s = time.perf_counter() - t0
+                cost = cost_per_point(fn, args, int(n), compiled=compiled)
+                _timed(compiled, args)  # first run: allocations, page faults
+                row = {"points": int(n), "batch_size": b, "kernel": name,
+                       "bytes_accessed": cost["bytes_accessed"], "fusions": cost["fusions"],
+                       "loops": cost["loops"], "compile_s": compile_s, "times_s": []}
+                rows.append(row)
+                timed.append((row, compiled, args))
+                log(f"  {n} points, batch {b}, {name}: compiled in {compile_s:.1f} s", verbose)
+    loads = []
+    for i in range(repeats):  # interleaved: every program once per round
+        loads.append(_load())
+        for row, fn, args in timed:
+            row["times_s"].append(_timed(fn, args))
+        log(f"  round {i + 1}/{repeats}, load {loads[-1]}", verbose)
+    loads.append(_load())
+    for row in rows:
+        row["ns_per_point"] = min(row["times_s"]) / row["points"] * 1e9
+        row["ns_per_point_median"] = float(np.median(row["times_s"])) / row["points"] * 1e9
+        row["median_over_min"] = row["ns_per_point_median"] / row["ns_per_point"]
+    import os
+
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    run = {"environment": env, "cpus_usable": cpus, "sizes": [int(n) for n in sizes],
+           "batch_sizes": list(batch_sizes), "repeats": repeats,
+           "current_commit": _commit(Path(current.__file__).parent.parent),
+           "load_average_per_round": loads, "rows": rows,
+           "ratios": size_ratios(rows), "ratios_median": size_ratios(rows, "ns_per_point_median")}
+    path = out / f"{stem}.json"
+    runs = json.loads(path.read_text())["runs"] if append and path.exists() else []
+    result = {"target": RATIO_TARGET, "runs": runs + [run]}
+    text = write_report(out, stem, result, sizes_markdown)
+    if verbose:
+        print(text)
+    return result
+
+
+def _batch(b) -> str:
+    return "default" if b is None else f"{b:,}"
+
+
+def sizes_markdown(result: dict) -> str:
+    """Per run: the ratio table (minimum times; medians in brackets), then the times."""
+    lines = ["## Envmap paths per frame size: cost ratios and time per shading point", "",
+             "float32 shading points of `shading_points` (wide grid of films, views, α) under "
+             "the prefiltered venice_sunset map; `envmap_radiance` of each method, `batch_size` "
+             "(the chunk of its `lax.map`) as listed (default: the library's). Each run times "
+             "every program once per round, rounds interleaved; a ratio is of the minima "
+             f"(of the medians in brackets). Target: each ratio ≤ {result['target']}. The "
+             "machine is shared: the load average before each round is listed (2 CPUs). "
+             "XLA bytes / pt: the cost analysis of the whole program over its points; XLA "
+             "counts a while loop's body once, so where loops lists the chunk loop (its trip "
+             "count last) the figure is one chunk's traffic plus what the loop carries, spread "
+             "over all points: compare it only within one size and batch.", ""]
+    for k, run in enumerate(result["runs"], 1):
+        env = run["environment"]
+        loads = [f"{x[0]:.1f}" for x in run["load_average_per_round"] if x]
+        lines += [f"### Run {k}: {env['date']}, commit {run['current_commit']}", "",
+                  f"{run['repeats']} rounds; {env['devices']}, {env['cpu_count']} CPUs "
+                  f"({run.get('cpus_usable') or env['cpu_count']} usable by the run), "
+                  f"jax {env['jax']}; 1-min load average per round: {', '.join(loads)}.", "",
+                  "| points | batch | " + " | ".join(n for n, _, _ in RATIOS) + " |",
+                  "|---:|---:|" + "---:|" * len(RATIOS)]
+        med = {(r["points"], r["batch_size"]): r for r in run["ratios_median"]}
+        for r in run["ratios"]:
+            m = med[(r["points"], r["batch_size"])]
+            cells = [f"{r[n]:.2f} ({m[n]:.2f})" if r[n] is not None else "–"
+                     for n, _, _ in RATIOS]
+            lines.append(f"| {r['points']:,} | {_batch(r['batch_size'])} | "
+                         + " | ".join(cells) + " |")
+        lines += ["", "| points | batch | kernel | ns / pt min (median) | median / min "
+                  "| XLA bytes / pt | XLA kernels | loops | compile s |",
+                  "|---:|---:|---|---:|---:|---:|---:|---|---:|"]
+        for r in run["rows"]:
+            loops = " ".join(str(t) for t in r["loops"]) or "–"
+            lines.append(f"| {r['points']:,} | {_batch(r['batch_size'])} | {r['kernel']} "
+                         f"| {r['ns_per_point']:.0f} ({r['ns_per_point_median']:.0f}) "
+                         f"| {r['median_over_min']:.2f} | {r['bytes_accessed']:.0f} "
+                         f"| {r['fusions']} | {loops} | {r['compile_s']:.1f} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -322,8 +478,20 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--baseline", help="folder of an older checkout to time against")
     p.add_argument("--no-envmap", action="store_true", help="the per-point kernels only")
+    p.add_argument("--sizes", type=int, nargs="+", metavar="N",
+                   help="per-size mode: the envmap paths at these point counts "
+                        f"(e.g. 65536 1048576 {FRAME_1440P}), ratios per size")
+    p.add_argument("--batch-sizes", type=int, nargs="+", metavar="B",
+                   help="per-size mode: envmap_radiance chunk sizes (0: its default)")
+    p.add_argument("--append", action="store_true",
+                   help="per-size mode: add this run to the runs in the existing report")
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
+    if args.sizes:
+        batch = tuple(b or None for b in (args.batch_sizes or [0]))
+        run_size_bench(args.out, sizes=args.sizes, batch_sizes=batch,
+                       repeats=3 if args.quick else args.repeats, append=args.append)
+        return 0
     points, repeats = (4096, 3) if args.quick else (args.points, args.repeats)
     run_kernel_bench(args.out, points=points, repeats=repeats, baseline=args.baseline,
                      envmap=not args.no_envmap)

@@ -68,14 +68,19 @@ METHODS = method_names("patch")  # the registry's order (core/methods.py)
 
 
 def _check_patch_args(film, theta_o, alpha, method, observer, options):
-    """(film, theta_o, alpha, options, broadcast shape), checked and normalised."""
-    film = V.check_film(film)
+    """(film, theta_o, alpha, options, broadcast shape), checked and normalised; a `Stack` or a
+    dispersive `Film` comes back as the validated `Stack` (its models cover the observer's
+    wavelengths) and its batch shape counts."""
+    if needs_stack(film):
+        film = V.check_material(film, wavelengths=get_observer(observer).wavelengths)
+    else:
+        film = V.check_film(film)
     theta_o = V.check_angle("theta_o", theta_o)
     alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
     V.check_choice("method", method, METHODS)
     V.check_choice("observer", observer, OBSERVERS)
     options = check_options(options)
-    shape = V.check_broadcast([("film", np.zeros(film.shape)), ("theta_o", theta_o),
+    shape = V.check_broadcast([("film", np.zeros(batch_shape(film))), ("theta_o", theta_o),
                                ("alpha", alpha)])
     return film, theta_o, alpha, options, shape
 
@@ -149,12 +154,8 @@ def _material_patch(material, theta_o, alpha, method, observer, options, lut, ba
         return per_band(lambda f, t, a: patch_radiance(
             f, t, a, method=method, observer=observer, options=options, lut=lut,
             batch_size=batch_size), material, theta_o, alpha, observer=observer)
-    stack = V.check_material(material, wavelengths=get_observer(observer).wavelengths)
-    theta_o = V.check_angle("theta_o", theta_o)
-    alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-    options = check_options(options)
-    shape = V.check_broadcast([("film", np.zeros(batch_shape(stack))), ("theta_o", theta_o),
-                               ("alpha", alpha)])
+    stack, theta_o, alpha, options, shape = _check_patch_args(material, theta_o, alpha, method,
+                                                              observer, options)
     batch_size = V.check_int("batch_size", batch_size, 1)
     return _stack_patch_jit(stack, theta_o, alpha, (method, observer, options.quadrature,
                                                     options.ndf, batch_size), shape)
@@ -270,18 +271,11 @@ def patch_radiance_mc(film: Film, theta_o: float, alpha: float, key, *, n_sample
     `n_samples` ≥ 2 (the standard error needs two); film fields, θ_o and α scalars;
     `options` supplies ndf and arithmetic (the other fields do not apply).
     """
-    if needs_stack(film):  # a Stack or a dispersive Film: the stack code (SPEC §12)
-        film = V.check_material(film, wavelengths=get_observer(observer).wavelengths)
-        theta_o = V.check_angle("theta_o", theta_o)
-        alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-        options = check_options(options)
-        shape = V.check_broadcast([("film", np.zeros(batch_shape(film))), ("theta_o", theta_o),
-                                   ("alpha", alpha)])
-        arithmetic = "complex"
-    else:
-        film, theta_o, alpha, options, shape = _check_patch_args(film, theta_o, alpha,
-                                                                 "reference", observer, options)
-        arithmetic = choose_arithmetic(film, options.arithmetic)
+    film, theta_o, alpha, options, shape = _check_patch_args(film, theta_o, alpha, "reference",
+                                                             observer, options)
+    # a Stack (or dispersive Film) runs the stack code (SPEC §12), complex by nature
+    arithmetic = ("complex" if isinstance(film, Stack)
+                  else choose_arithmetic(film, options.arithmetic))
     if shape != ():
         raise ValueError(f"patch_radiance_mc evaluates one patch: film fields, theta_o and "
                          f"alpha must be scalars; got broadcast shape {shape}")

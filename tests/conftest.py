@@ -119,3 +119,13 @@ def pytest_configure(config):
 def _strict_promotion():
     with jax.numpy_dtype_promotion("strict"):
         yield
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs():
+    """Drop JAX's in-memory caches of compiled programs after each test file: a worker that
+    kept every program of its files grew to ~8 GB, and two of them on the 24 GB CI machine
+    aborted inside XLA while serialising an executable. A later file that needs a program
+    again reads it from the persistent compilation cache above."""
+    yield
+    jax.clear_caches()

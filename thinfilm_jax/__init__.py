@@ -57,6 +57,10 @@ from .fit.film_fit import FitOptions as FitOptions
 from .fit.film_fit import FitResult as FitResult
 from .fit.film_fit import fit_film as fit_film
 from .fit.film_fit import fit_spectrum as fit_spectrum
+from .fit.photo import PhotoResult as PhotoResult
+from .fit.photo import fit_photo as fit_photo
+from .spectral.camera import camera_response as camera_response
+from .core.image import read_photo as read_photo
 from .interop.gltf import film_from_gltf as film_from_gltf
 from .interop.gltf import film_to_gltf as film_to_gltf
 from .shading.ibl import METHODS as ENVMAP_METHODS

@@ -1,0 +1,680 @@
+r"""Thickness maps from photographs (SPEC §13): camera and light inside the fit.
+
+A pixel p of a photograph of a film of unknown thickness d_p reads, in linear camera units,
+
+$$ o_{pc} = g_c \sum_{j} C_{cj}\, s_j(d_p) + \varepsilon_{pc}, \qquad
+   s_j(d) = \sum_k w_{kj}\, \bar R(\lambda_k, d), $$
+
+where R̄ is the template's exact reflectance (SPEC §2, §12: the stack recursion, every index
+model evaluated at each λ_k) at the view angle θ_o, or, for a rough surface (α given), its
+patch average under uniform light Σ_q ω_q R(λ, cos θ_{h,q}) on the quadrature of SPEC §7;
+w are the camera's weights under the light (`spectral.camera`: a white reflector reads 1);
+g = exposure · white balance (3 gains, always free); and C is the identity for a known camera
+or a fitted 3 × 3 matrix (rows summing to 1) for ``camera="unknown"``. The noise ε has the
+per-pixel standard deviation σ_pc² = σ_image² + (f · o_pc)²: the decoded image's noise
+(quantisation and an Immerkær estimate, `core.image`) and a relative model floor f
+(`model_floor`, the camera and light being known only so well).
+
+The fit, in the order it runs:
+
+1. **Table.** The colour s(d_g) of every thickness on a grid over `thickness_range` (step
+   `grid_step_nm`) and its derivative ds/dd (forward mode), exact, once per photograph: at a
+   fixed view it does not depend on the pixel. Between grid points s(d) is the cubic Hermite
+   interpolant, whose error (h⁴ s⁗/384) is below 1e-9 at 1 nm steps (tested).
+2. **Gains** (and C). With `reference` regions of known thickness: least squares of the
+   regions' mean colours against s(d_ref) (C too for an unknown camera, which needs three
+   regions of distinct colour). Without: alternating minimisation on a subsample of pixels,
+   the nearest-colour screen given the gains and the closed-form gains given the
+   thicknesses, from a ladder of starting exposures; the lowest total χ² wins.
+3. **Screen.** χ²_p(d_g) for every pixel on a coarse grid (`screen_step_nm`, every basin of
+   χ²(d) holds a grid point: fringes are ≳ 100 nm wide) as one matrix product, and the k = 4
+   lowest local minima of each pixel. Channels clipped at black or full scale are censored:
+   they cost only when the model is on the wrong side of the clip.
+4. **Refine.** Per pixel and candidate, fixed-step Levenberg–Marquardt (`fit.engine`) on the
+   Hermite interpolant, the thickness kept in the range. The pixel's thickness is its best
+   refined minimum; with `smoothness_nm` = τ, iterated conditional modes over the candidates
+   with the neighbour prior ½((d_p − d_q)/τ)² choose it instead (Besag 1986). Then the gains
+   (without references; an unknown camera's matrix from every pixel, the pads anchoring the
+   orders) alternate with the thicknesses until they settle, and a final refine adds the
+   prior's residuals to the neighbours.
+5. **Uncertainty.** The reduced χ² = Σ χ²_p / (2P − n_global) (3 residuals, one thickness per
+   pixel). Standard errors are the linearised ones σ_d = (J^T J)^{-1/2} times √(reduced χ²);
+   a pixel is `ambiguous` where another local minimum at least 15 nm away (another fringe
+   order) has a χ² above its own by less than 4 · max(1, reduced χ²) (two standard
+   deviations). A reduced χ² above `chi2_warn` raises a warning
+   (in the result and by `warnings.warn`): the model does not explain the photograph (wrong
+   encoding, camera, light, angle or material).
+
+Example (an sRGB rendering of an oxide wedge on silicon, exposure and white balance unknown):
+    >>> import numpy as np
+    >>> from thinfilm_jax import Film, refractive_index
+    >>> from thinfilm_jax.fit.photo import fit_photo, render_photo
+    >>> film = Film(0.0, refractive_index("SiO2"), refractive_index("Si"))
+    >>> d = np.linspace(50.0, 600.0, 64).reshape(8, 8)
+    >>> img = render_photo(film, d, camera="srgb", exposure=0.7)
+    >>> res = fit_photo(img, film, camera="srgb", encoding="linear", thickness_range=(0, 800))
+    >>> bool(np.max(np.abs(res.thickness - d)) < 0.5)
+    True
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+import warnings
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..brdf.microfacet import patch_quadrature
+from ..core import _validate as V
+from ..core.image import Photo, read_mask, read_photo
+from ..core.material import as_stack
+from ..core.stack import Stack
+from ..optics.stack import stack_reflectance_traced
+from ..spectral.camera import Camera, camera_response
+from .engine import covariance, levenberg_marquardt
+
+__all__ = ["PhotoResult", "fit_photo", "photo_colours", "render_photo"]
+
+_HI = jax.lax.Precision.HIGHEST
+_CANDIDATES = 4  # local minima per pixel kept for the neighbour prior
+_EXPOSURE_LADDER = 2.0 ** np.arange(-2.0, 2.01, 0.5)  # × the brightness-matched exposure
+_SUBSAMPLE = 3000  # pixels for the gain search without references
+_GAIN_ROUNDS = 8  # alternations of the gains (an unknown camera's matrix) with the thicknesses
+_DISTINCT_NM = 15.0  # two local minima this far apart are different fringe orders
+
+
+class PhotoResult(NamedTuple):
+    """A thickness map fitted to a photograph (`fit_photo`). Maps are (H, W) NumPy arrays;
+    pixels not fitted (clipped, outside `mask`) are NaN (False in `ambiguous`).
+
+    Attributes:
+        thickness, stderr: the fitted thickness of the template's layer and its standard
+            error (nm), scaled by √(reduced χ²).
+        ambiguous: another fringe order explains the pixel within its noise.
+        alternative: that other order's thickness (nm; NaN where none was found).
+        chi2: the pixel's χ² (3 residuals).
+        exposure: the green channel's gain g_G (linear camera units per unit reflectance).
+        white_balance: g / g_G (3,).
+        camera_matrix: C (3, 3), rows summing to 1 (the identity for a known camera).
+        camera_matrix_stderr: standard errors of C's entries (zeros unless fitted).
+        reduced_chi2: Σ χ²_p / (2P − n_global).
+        warnings: what the fit found wrong (a misfit, clipped pixels, ambiguity).
+        encoding: how the image was read (`core.image.Photo.describe`).
+        camera, illuminant: the camera and light names of the model.
+        n_pixels, seconds: pixels fitted and the wall time (compilation included).
+    """
+
+    thickness: np.ndarray
+    stderr: np.ndarray
+    ambiguous: np.ndarray
+    alternative: np.ndarray
+    chi2: np.ndarray
+    exposure: float
+    white_balance: np.ndarray
+    camera_matrix: np.ndarray
+    camera_matrix_stderr: np.ndarray
+    reduced_chi2: float
+    warnings: tuple
+    encoding: str
+    camera: str
+    illuminant: str
+    n_pixels: int
+    seconds: float
+
+    @property
+    def pixels_per_second(self) -> float:
+        return self.n_pixels / self.seconds if self.seconds > 0 else float("inf")
+
+    def summary(self) -> dict:
+        """The fit's global numbers and residual summary (JSON-ready)."""
+        ok = np.isfinite(self.thickness)
+        return {
+            "encoding": self.encoding, "camera": self.camera, "illuminant": self.illuminant,
+            "exposure": float(self.exposure),
+            "white_balance": [float(v) for v in self.white_balance],
+            "camera_matrix": np.asarray(self.camera_matrix).tolist(),
+            "camera_matrix_stderr": np.asarray(self.camera_matrix_stderr).tolist(),
+            "reduced_chi2": float(self.reduced_chi2),
+            "pixels_fitted": int(self.n_pixels),
+            "pixels_ambiguous": int(np.sum(self.ambiguous)),
+            "median_stderr_nm": float(np.median(self.stderr[ok])) if ok.any() else None,
+            "chi2_p50_p99": [float(np.percentile(self.chi2[ok], q)) for q in (50, 99)]
+            if ok.any() else None,
+            "seconds": float(self.seconds), "pixels_per_second": float(self.pixels_per_second),
+            "warnings": list(self.warnings),
+        }
+
+
+# ----------------------------------------------------------------------------- the model
+def _layer_stack(template, layer: int) -> Stack:
+    stack = as_stack(template)
+    if not 0 <= layer < stack.n_layers:
+        raise ValueError(f"layer must index the template's {stack.n_layers} layer(s), "
+                         f"got {layer}")
+    return stack
+
+
+def _geometry(theta_o, alpha):
+    """(cosines (N,), weights (N,)) at which the reflectance is averaged: the mirror view, or
+    the SPEC §7 patch quadrature of a rough surface under uniform light."""
+    if alpha is None:
+        return np.asarray([np.cos(theta_o)]), np.asarray([1.0])
+    quad = patch_quadrature(jnp.float64(theta_o), jnp.float64(alpha))
+    return np.asarray(quad.cos_hi).ravel(), np.asarray(quad.weight).ravel()
+
+
+@functools.partial(jax.jit, static_argnames=("layer",))
+def _colours(d, stack, layer, cos, qw, lam, weights):
+    """(s (G, 3), ds/dd (G, 3)) at thicknesses d (G,) of layer `layer` (module docstring)."""
+
+    def s_of(di):
+        st = stack._replace(thickness=jnp.asarray(stack.thickness).at[layer].set(di))
+        r = stack_reflectance_traced(st, cos[:, None], lam[None, :])  # (N, K)
+        rbar = jnp.matmul(qw, r, precision=_HI)  # (K,)
+        return jnp.matmul(rbar, weights, precision=_HI)
+
+    return jax.vmap(lambda di: jax.jvp(s_of, (di,), (jnp.ones_like(di),)))(d)
+
+
+def photo_colours(template, thickness, *, camera: Camera, theta_o=0.0, alpha=None,
+                  layer: int = 0):
+    """The camera colours s(d) (..., 3) of the template with layer `layer` at `thickness`
+    (..., nm), white-balanced to the camera's light (a white reflector reads 1)."""
+    stack = _layer_stack(V.check_material(template, "template",
+                                          wavelengths=camera.wavelengths), layer)
+    cos, qw = _geometry(float(theta_o), alpha)
+    d = np.asarray(thickness, float)
+    s, _ = _colours(jnp.asarray(d.ravel()), stack, layer, jnp.asarray(cos), jnp.asarray(qw),
+                    jnp.asarray(camera.wavelengths), jnp.asarray(camera.weights))
+    return np.asarray(s).reshape(*d.shape, 3)
+
+
+def render_photo(template, thickness, *, camera="srgb", illuminant="D65", theta_o=0.0,
+                 alpha=None, layer: int = 0, exposure: float = 1.0,
+                 white_balance=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """A linear photograph (H, W, 3) of the template with the thickness map `thickness`
+    (H, W): exposure · wb_c · s_c(d) of the module docstring (no noise, no encoding). The
+    same model `fit_photo` fits: for tests and examples; studies render independently."""
+    cam = camera_response(camera, illuminant)
+    s = photo_colours(template, thickness, camera=cam, theta_o=theta_o, alpha=alpha,
+                      layer=layer)
+    return exposure * np.asarray(white_balance, float) * s
+
+
+def _hermite(d, lo, h, s, ds):
+    """Cubic Hermite interpolant of the table (s, ds) (G, 3) on lo + h·g at d (scalar)."""
+    g = s.shape[0]
+    u = (d - lo) / h
+    fi = jnp.clip(jnp.floor(u), 0, g - 2)
+    i = fi.astype(jnp.int32)
+    t = u - fi
+    t2, t3 = t * t, t * t * t
+    h00, h10 = 2 * t3 - 3 * t2 + 1, t3 - 2 * t2 + t
+    h01, h11 = -2 * t3 + 3 * t2, t3 - t2
+    return h00 * s[i] + h10 * h * ds[i] + h01 * s[i + 1] + h11 * h * ds[i + 1]
+
+
+# ----------------------------------------------------------------------------- screen
+@functools.partial(jax.jit, static_argnames=("k",))
+def _screen(obs, sig, cens, feats, grid, k):
+    """The k lowest local minima of χ²_p(d_g) over the screen grid `grid` for each pixel of a
+    chunk (P,), each at least `_DISTINCT_NM` from the better ones (distinct fringe orders):
+    grid indices (P, k) and χ² (P, k) (+inf where a pixel has fewer minima).
+
+    Channels censored at 0 or at full scale (`cens` 1 / 2) cost only on the wrong side
+    (`_residual`). χ² is one matrix product: pixel terms (P, 12) against the grid's
+    `feats` (G, 12) = [pred², pred, relu(pred)², relu(1 − pred)²] per channel, plus Σ w o²."""
+    w = 1.0 / (sig * sig)  # (P, 3)
+    wu, wl, wh = (w * (cens == c).astype(w.dtype) for c in (0, 1, 2))
+    a = jnp.concatenate([wu, -2.0 * obs * wu, wl, wh], axis=-1)  # (P, 12)
+    chi = jnp.sum(obs * obs * wu, axis=-1)[:, None] + jnp.matmul(a, feats.T, precision=_HI)
+    pad = jnp.full((chi.shape[0], 1), jnp.inf, chi.dtype)
+    left = jnp.concatenate([pad, chi[:, :-1]], axis=-1)
+    right = jnp.concatenate([chi[:, 1:], pad], axis=-1)
+    local = jnp.where((chi <= left) & (chi < right), chi, jnp.inf)
+    tops, chis = [], []
+    for _ in range(k):  # the best minimum, then the best ≥ _DISTINCT_NM from those taken, …
+        i = jnp.argmin(local, axis=-1)
+        tops.append(i)
+        chis.append(jnp.take_along_axis(local, i[:, None], -1)[:, 0])
+        local = jnp.where(jnp.abs(grid[None, :] - grid[i][:, None]) < _DISTINCT_NM, jnp.inf,
+                          local)
+    return jnp.stack(tops, -1), jnp.stack(chis, -1)
+
+
+def _features(pred):
+    """(G, 12) grid terms of `_screen` from the predictions (G, 3)."""
+    relu = np.maximum
+    return jnp.asarray(np.concatenate([pred * pred, pred, relu(pred, 0.0) ** 2,
+                                       relu(1.0 - pred, 0.0) ** 2], axis=-1))
+
+
+def _residual(pred, o, sg, cens):
+    """(pred − o)/σ per channel; a channel censored at 0 (1) costs relu(pred)/σ, one at full
+    scale (2) relu(1 − pred)/σ: a clipped reading says only on which side the truth is."""
+    return jnp.where(cens == 0, pred - o,
+                     jnp.where(cens == 1, jax.nn.relu(pred), jax.nn.relu(1.0 - pred))) / sg
+
+
+def _chunks(n, size):
+    return [slice(i, min(i + size, n)) for i in range(0, n, size)]
+
+
+def _pad_to(a, size):
+    """Pad the leading axis of a chunk to `size` (repeating its last row): one compilation."""
+    n = a.shape[0]
+    return a if n == size else np.concatenate([a, np.repeat(a[-1:], size - n, axis=0)])
+
+
+def _screen_all(obs, sig, cens, feats, grid, k, chunk, bar):
+    out = []
+    size = min(chunk, obs.shape[0])
+    for s in _chunks(obs.shape[0], size):
+        n = s.stop - s.start
+        r = _screen(*(jnp.asarray(_pad_to(a[s], size)) for a in (obs, sig, cens)), feats,
+                    grid, k)
+        out.append([np.asarray(v)[:n] for v in r])
+        if bar is not None:
+            bar.update(n)
+    return [np.concatenate(v) for v in zip(*out)]
+
+
+# ----------------------------------------------------------------------------- gains
+def _closed_gains(obs, sig, cens, s_c):
+    """Per-channel least squares g_c = Σ o s / σ² / Σ s² / σ² over the uncensored readings
+    (s_c = C s, (P, 3))."""
+    w = (cens == 0) / (sig * sig)
+    return np.sum(obs * s_c * w, axis=0) / np.maximum(np.sum(s_c * s_c * w, axis=0), 1e-300)
+
+
+def _search_gains(obs, sig, cens, s_screen, grid, chunk):
+    """Gains without references (module docstring, step 2): alternating minimisation from a
+    ladder of exposures around the brightness-matched one, on a subsample, on the screen
+    grid's colours `s_screen` (G, 3)."""
+    step = max(1, obs.shape[0] // _SUBSAMPLE)
+    o, sg, cs = obs[::step], sig[::step], cens[::step]
+    e0 = np.median(o[:, 1]) / max(np.median(s_screen[:, 1]), 1e-12)
+    best = (np.inf, None)
+    for e in e0 * _EXPOSURE_LADDER:
+        g = np.full(3, e)
+        for _ in range(8):
+            idx, chi = _screen_all(o, sg, cs, _features(s_screen * g), grid, 1, chunk, None)
+            g_new = _closed_gains(o, sg, cs, s_screen[idx[:, 0]])
+            if np.allclose(g_new, g, rtol=1e-4):
+                break
+            g = g_new
+        total = float(np.sum(np.minimum(chi[:, 0], 1e6)))
+        if total < best[0]:
+            best = (total, g)
+    return best[1]
+
+
+def _reference_gains(obs_img, sig_img, cens_img, valid, reference, s_of, kind):
+    """(gains (3,), C (3, 3), C's stderr (3, 3)) from regions of known thickness."""
+    h, w = valid.shape
+    rows = []
+    for i, (mask, d) in enumerate(reference):
+        m = read_mask(mask, (h, w), name=f"reference[{i}] mask") & valid
+        if not m.any():
+            raise ValueError(f"reference[{i}] has no usable pixel (its mask is empty or all "
+                             f"its pixels are clipped)")
+        dv = float(d)
+        if not np.isfinite(dv) or dv < 0:
+            raise ValueError(f"reference[{i}] thickness must be finite and ≥ 0 nm, got {d}")
+        rows.append((obs_img[m], np.where(cens_img[m] == 0, sig_img[m], np.inf), s_of(dv)))
+    if kind != "unknown":
+        o = np.concatenate([r[0] for r in rows])
+        sg = np.concatenate([r[1] for r in rows])
+        s = np.concatenate([np.broadcast_to(r[2], r[0].shape) for r in rows])
+        return _closed_gains(o, sg, np.zeros(o.shape, int), s), np.eye(3), np.zeros((3, 3))
+    thick = sorted({round(float(d), 6) for _, d in reference})
+    s_ref = np.stack([r[2] for r in rows])
+    sv = np.linalg.svd(s_ref, compute_uv=False) if len(rows) >= 3 else np.zeros(1)
+    if len(thick) < 3 or sv[-1] < 1e-3 * sv[0]:
+        raise ValueError(f"camera='unknown' fits a 3 × 3 matrix from reference regions: it needs "
+                         f"at least 3 regions whose thicknesses give distinct colours, got "
+                         f"{len(rows)} region(s) at {thick} nm")
+    # o_pc = Σ_j M_cj s_j: per channel a weighted linear regression over the reference pixels
+    m_rows, se_rows = [], []
+    for c in range(3):
+        a = np.concatenate([np.broadcast_to(r[2], (r[0].shape[0], 3)) / r[1][:, c:c + 1]
+                            for r in rows])
+        b = np.concatenate([r[0][:, c] / r[1][:, c] for r in rows])
+        coef, *_ = np.linalg.lstsq(a, b, rcond=None)
+        dof = max(a.shape[0] - 3, 1)
+        s2 = max(float(np.sum((a @ coef - b) ** 2)) / dof, 1.0)
+        cov = s2 * np.linalg.pinv(a.T @ a)
+        m_rows.append(coef)
+        se_rows.append(np.sqrt(np.abs(np.diag(cov))))
+    m, se = np.stack(m_rows), np.stack(se_rows)
+    g = m.sum(axis=1)
+    if np.any(g <= 0):
+        raise ValueError("the fitted camera matrix maps white to a non-positive colour: the "
+                         "reference regions do not determine it (check masks and thicknesses)")
+    return g, m / g[:, None], se / g[:, None]
+
+
+def _matrix_from_pixels(obs, sig, cens, s_fit):
+    """M (3, 3) with o_c ≈ Σ_j M_cj s_j over every uncensored reading: per channel a
+    weighted linear least-squares fit (the unknown camera's self-calibration)."""
+    rows = []
+    for c in range(3):
+        w = (cens[:, c] == 0) / sig[:, c]
+        coef, *_ = np.linalg.lstsq(s_fit * w[:, None], obs[:, c] * w, rcond=None)
+        rows.append(coef)
+    return np.stack(rows)
+
+
+# ----------------------------------------------------------------------------- refine
+@functools.partial(jax.jit, static_argnames=("steps",))
+def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, steps):
+    """Per pixel: Levenberg–Marquardt on [(g C s(d) − o)/σ, (d − d_q)/τ]; returns d, the
+    data χ² and the standard error (absolute σ)."""
+
+    def pixel(o, sg, cs, x0, q, ok):
+        def data(x):
+            pred = jnp.matmul(gm, _hermite(x[0], lo, h, s_tab, ds_tab), precision=_HI)
+            return _residual(pred, o, sg, cs)
+
+        def res(x):
+            return jnp.concatenate([data(x), jnp.where(ok, (x[0] - q) / tau, 0.0)])
+
+        x = levenberg_marquardt(res, x0[None], lo_d[None], hi_d[None], steps)
+        r = data(x)
+        cov = covariance(data, x, absolute_sigma=True)
+        return x[0], jnp.sum(r * r), cov.stderr[0]
+
+    return jax.vmap(pixel)(obs, sig, cens, d0, nb, nb_ok)
+
+
+def _neighbours(d, valid):
+    p = np.pad(d, 1, constant_values=0.0)
+    v = np.pad(valid, 1, constant_values=False)
+
+    def four(a):
+        return np.stack([a[:-2, 1:-1], a[2:, 1:-1], a[1:-1, :-2], a[1:-1, 2:]], axis=-1)
+
+    return four(p), four(v)
+
+
+def _icm(cand_d, cand_chi, valid, tau, sweeps=6):
+    """Iterated conditional modes over K candidate thicknesses per pixel (H, W, K) with
+    energy ½χ² + Σ_q ½((d − d_q)/τ)² (checkerboard updates); returns the chosen index."""
+    h, w, _ = cand_d.shape
+    idx = np.argmin(cand_chi, axis=-1)
+    colour = (np.add.outer(np.arange(h), np.arange(w)) % 2).astype(bool)
+    for _ in range(sweeps):
+        for c in (False, True):
+            cur = np.take_along_axis(cand_d, idx[..., None], -1)[..., 0]
+            nb, ok = _neighbours(np.where(valid, cur, 0.0), valid)
+            pair = np.sum(np.where(ok[..., None, :], ((cand_d[..., :, None] - nb[..., None, :])
+                                                       / tau) ** 2, 0.0), axis=-1)
+            new = np.argmin(0.5 * cand_chi + 0.5 * pair, axis=-1)
+            idx = np.where(colour == c, new, idx)
+    return idx
+
+
+# ----------------------------------------------------------------------------- entry point
+def _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor, grid_step_nm,
+                chi2_warn):
+    if np.ndim(theta_o) != 0:
+        raise ValueError(f"theta_o must be a scalar (one view for the photograph), got shape "
+                         f"{np.shape(theta_o)}")
+    V.check_finite("theta_o", theta_o)
+    V.check_range("theta_o", float(theta_o), 0.0, np.pi / 2, hi_open=True, why=" (radians)")
+    if alpha is not None:
+        V.check_range("alpha", float(alpha), 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    lo, hi = (float(v) for v in thickness_range)
+    if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 <= lo < hi):
+        raise ValueError(f"thickness_range must be (lo, hi) with 0 ≤ lo < hi nm, got "
+                         f"{thickness_range}")
+    if smoothness_nm is not None and not float(smoothness_nm) > 0:
+        raise ValueError(f"smoothness_nm must be > 0 nm or None, got {smoothness_nm}")
+    for name, v in (("model_floor", model_floor), ("grid_step_nm", grid_step_nm),
+                    ("chi2_warn", chi2_warn)):
+        if not (np.isfinite(v) and v > 0 if name != "model_floor" else np.isfinite(v)
+                and v >= 0):
+            raise ValueError(f"{name} must be a positive number, got {v}")
+    return lo, hi
+
+
+def _censoring(photo: Photo) -> np.ndarray:
+    """(H, W, 3) per channel: 0 a reading, 1 clipped at black (a value ≤ 0), 2 clipped at full
+    scale (≥ 1, for integer or sRGB-encoded sources; linear float data have no ceiling)."""
+    v = photo.linear
+    ceiling = photo.bit_depth is not None or photo.encoding == "srgb"
+    return np.where(v <= 0, 1, np.where(ceiling & (v >= 1.0), 2, 0)).astype(np.int32)
+
+
+def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srgb",
+              reference=None, theta_o=0.0, alpha=None, thickness_range=(0.0, 2000.0),
+              layer: int = 0, smoothness_nm=None, mask=None, bit_depth=None,
+              model_floor: float = 0.005, grid_step_nm: float = 1.0,
+              screen_step_nm: float = 4.0, steps: int = 6,
+              chi2_warn: float = 4.0, chunk: int = 4096, progress: bool = False
+              ) -> PhotoResult:
+    """Fit the thickness map of a photograph of a film (module docstring; SPEC §13).
+
+    Args:
+        image: an (H, W, 3) array (uint8, uint16, or float in [0, 1]) or a path (PNG, JPEG,
+            TIFF, EXR, HDR; camera RAW through rawpy), read by `core.image.read_photo`.
+        template: the `Film` or `Stack` (constant or dispersive indices) whose layer `layer`
+            has the unknown thickness (its value in the template is ignored).
+        camera: a colour-science camera name, a CSV of sensitivities or
+            (wavelengths (K,), sensitivities (K, 3)), "srgb" or "unknown"
+            (`spectral.camera.camera_response`).
+        illuminant: a CIE illuminant name or a measured spectrum (M, 2).
+        encoding: "srgb", "linear" or "raw"; bit_depth: the declared bit depth (8, 16) or
+            None (checked against the file).
+        reference: regions of known thickness, a list of (mask (H, W) bool or a mask image,
+            thickness nm); gains (and C for camera="unknown") come from them.
+        theta_o: the view angle (radians) of the whole photograph; alpha: GGX roughness of a
+            rough film under uniform light (None: a mirror view of a uniform light).
+        thickness_range: (lo, hi) nm, the screen's range; layer: which layer is unknown.
+        smoothness_nm: τ of the neighbour prior that chooses fringe orders (None: per pixel).
+        mask: (H, W) bool or a mask image: pixels to fit (default all unclipped pixels).
+        model_floor: relative model uncertainty f; grid_step_nm: the table's step;
+        screen_step_nm: the screen grid's step (a multiple of grid_step_nm; every basin of
+            χ²(d) must hold a grid point: fringes are ≳ 100 nm wide);
+        steps: Levenberg–Marquardt steps; chi2_warn: the reduced χ² above which the fit warns;
+        chunk: pixels per batch; progress: a tqdm progress bar over pixels.
+
+    Returns:
+        `PhotoResult`.
+
+    Raises:
+        ValueError: naming what is wrong: an unreadable or corrupt image, an encoding or bit
+            depth that contradicts the file, a mask of another size, a reference without
+            usable pixels, an unknown camera or illuminant (listing the known ones),
+            camera="unknown" without three distinct references, no pixel to fit, or an
+            argument out of range.
+    """
+    t0 = time.perf_counter()
+    lo, hi = _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor,
+                         grid_step_nm, chi2_warn)
+    cam = camera_response(camera, illuminant)
+    if cam.kind == "unknown" and not reference:
+        raise ValueError("camera='unknown' needs reference regions of known thickness (at least "
+                         "3 of distinct colour) to fit its 3 × 3 matrix")
+    stack = _layer_stack(V.check_material(template, "template", wavelengths=cam.wavelengths),
+                         layer)
+    photo: Photo = read_photo(image, encoding, bit_depth=bit_depth)
+    h, w, _ = photo.linear.shape
+    cens_img = _censoring(photo)
+    valid = ~np.all(cens_img > 0, axis=-1)
+    if mask is not None:
+        valid &= read_mask(mask, (h, w), name="mask")
+    if not valid.any():
+        raise ValueError("no pixel to fit: every pixel is clipped or outside the mask")
+    sig_img = np.sqrt(photo.noise ** 2 + (model_floor * photo.linear) ** 2
+                      + (1e-6 * max(float(photo.linear.max()), 1e-12)) ** 2)
+
+    # 1. the table (fine, for the interpolant) and the screen grid (every m-th point)
+    g_n = int(np.ceil((hi - lo) / grid_step_nm)) + 1
+    grid = np.linspace(lo, hi, g_n)
+    step = (hi - lo) / (g_n - 1)
+    every = max(1, int(round(screen_step_nm / step)))
+    coarse = np.unique(np.r_[np.arange(0, g_n, every), g_n - 1])
+    cos, qw = _geometry(float(theta_o), alpha)
+    args = (stack, layer, jnp.asarray(cos), jnp.asarray(qw), jnp.asarray(cam.wavelengths),
+            jnp.asarray(cam.weights))
+    s_tab, ds_tab = (np.asarray(v) for v in _colours(jnp.asarray(grid), *args))
+
+    def s_of(d):
+        return np.asarray(_colours(jnp.asarray([d]), *args)[0])[0]
+
+    # 2. gains
+    where = np.flatnonzero(valid.ravel())
+    obs = photo.linear.reshape(-1, 3)[where]
+    sig = sig_img.reshape(-1, 3)[where]
+    cens = cens_img.reshape(-1, 3)[where]
+    n = obs.shape[0]
+    if reference:
+        gains, cmat, cmat_se = _reference_gains(photo.linear, sig_img, cens_img, valid,
+                                                reference, s_of, cam.kind)
+    else:
+        cmat, cmat_se = np.eye(3), np.zeros((3, 3))
+        gains = _search_gains(obs, sig, cens, s_tab[coarse], jnp.asarray(grid[coarse]), chunk)
+    table = (lo, hi, step, s_tab, ds_tab)
+    tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
+    k = _CANDIDATES
+    bar = _progress(progress, (3 + k) * n)
+    try:
+        # 3. screen: the k best local minima per pixel; 4. refine each of them
+        gm = gains[:, None] * cmat
+        top, top_chi = _screen_all(obs, sig, cens, _features(s_tab[coarse] @ gm.T),
+                                   jnp.asarray(grid[coarse]), k, chunk, bar)
+        cand0 = grid[coarse][top]  # (n, k); a missing minimum repeats the pixel's best
+        cand0 = np.where(np.isfinite(top_chi), cand0, cand0[:, :1])
+        rep = (np.repeat(a, k, axis=0) for a in (obs, sig, cens))
+        cd, cchi, _ = (v.reshape(n, k) for v in _refine_all(
+            *rep, cand0.ravel(), None, np.inf, gm, table, steps, chunk, bar))
+        if smoothness_nm is None:
+            pick = np.argmin(cchi, axis=-1)
+        else:
+            cd_img = np.zeros((h * w, k))
+            cchi_img = np.full((h * w, k), 1e30)
+            cd_img[where], cchi_img[where] = cd, cchi
+            pick = _icm(cd_img.reshape(h, w, k), cchi_img.reshape(h, w, k), valid,
+                        tau).ravel()[where]
+        rows = np.arange(n)
+        d_best = cd[rows, pick]
+        other = np.where(np.abs(cd - d_best[:, None]) >= _DISTINCT_NM, cchi, np.inf)
+        alt = np.argmin(other, axis=-1)
+        has_alt = np.isfinite(other[rows, alt])
+        d_alt = np.where(has_alt, cd[rows, alt], d_best)
+        # 5. gains once more from every pixel (no references); an unknown camera's matrix
+        #    from every pixel, alternating with the thicknesses (the pads anchor the orders);
+        #    then the final refine: the chosen thickness (with the neighbour prior) and the
+        #    other order (without)
+        for _ in range(_GAIN_ROUNDS if not reference or cam.kind == "unknown" else 0):
+            s_fit = _host_hermite(d_best, lo, step, s_tab, ds_tab)
+            if cam.kind == "unknown":
+                gm_new = _matrix_from_pixels(obs, sig, cens, s_fit)
+            else:
+                gm_new = _closed_gains(obs, sig, cens, s_fit @ cmat.T)[:, None] * cmat
+            change = np.max(np.abs(gm_new - gm)) / np.max(np.abs(gm))
+            gm = gm_new
+            d_best, _, _ = _refine_all(obs, sig, cens, d_best, None, np.inf, gm, table, steps,
+                                       chunk, None)
+            if change < 1e-8:
+                break
+        gains = gm.sum(axis=1) if cam.kind == "unknown" else np.diag(gm).copy()
+        cmat = gm / gains[:, None]
+        d, chi, se = _refine_all(obs, sig, cens, d_best, valid if np.isfinite(tau) else None,
+                                 tau, gm, table, steps, chunk, bar, where=where)
+        _, chi_alt, _ = _refine_all(obs, sig, cens, d_alt, None, np.inf, gm, table, steps,
+                                    chunk, bar)
+        chi_alt = np.where(has_alt, chi_alt, np.inf)
+        d_alt = np.where(has_alt, d_alt, np.nan)
+    finally:
+        if bar is not None:
+            bar.close()
+
+    # 5. uncertainty, ambiguity, warnings
+    n_global = 3 + (6 if cam.kind == "unknown" else 0)
+    dof = max(2 * n - n_global, 1)
+    rchi2 = float(np.sum(chi) / dof)
+    scale = np.sqrt(rchi2)
+    amb = np.isfinite(chi_alt) & (chi_alt - chi < 4.0 * max(rchi2, 1.0))
+    notes = []
+    if rchi2 > chi2_warn:
+        notes.append(f"reduced chi2 = {rchi2:.3g} > {chi2_warn:g}: the model does not explain "
+                     f"the photograph within its noise (check the encoding ({photo.encoding}), "
+                     f"camera ({cam.name}), light ({cam.illuminant}), view angle and "
+                     f"material); thicknesses may be wrong")
+    n_clip = int(np.sum(np.any(cens_img > 0, axis=-1) & valid))
+    if n_clip:
+        notes.append(f"{n_clip} pixel(s) with a clipped channel, fitted with that channel "
+                     f"censored")
+    if np.sum(~valid):
+        notes.append(f"{int(np.sum(~valid))} pixel(s) not fitted (every channel clipped or "
+                     f"outside the mask)")
+    if np.mean(amb) > 0.2:
+        notes.append(f"{100 * np.mean(amb):.0f} % of pixels are ambiguous between fringe "
+                     f"orders: add reference regions, smoothness_nm, or narrow thickness_range")
+    for note in notes[:1] if rchi2 > chi2_warn else []:
+        warnings.warn(note, stacklevel=2)
+
+    def full(v, fill=np.nan, dtype=float):
+        out = np.full(h * w, fill, dtype)
+        out[where] = v
+        return out.reshape(h, w)
+
+    return PhotoResult(
+        thickness=full(d), stderr=full(se * scale), ambiguous=full(amb, False, bool),
+        alternative=full(d_alt), chi2=full(chi),
+        exposure=float(gains[1]), white_balance=gains / gains[1], camera_matrix=cmat,
+        camera_matrix_stderr=cmat_se, reduced_chi2=rchi2, warnings=tuple(notes),
+        encoding=photo.describe(), camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
+        seconds=time.perf_counter() - t0)
+
+
+def _host_hermite(d, lo, h, s, ds):
+    """`_hermite` on the host for a vector d (P,) → (P, 3)."""
+    g = s.shape[0]
+    u = (d - lo) / h
+    i = np.clip(np.floor(u), 0, g - 2).astype(int)
+    t = (u - i)[:, None]
+    t2, t3 = t * t, t * t * t
+    return ((2 * t3 - 3 * t2 + 1) * s[i] + (t3 - 2 * t2 + t) * h * ds[i]
+            + (-2 * t3 + 3 * t2) * s[i + 1] + (t3 - t2) * h * ds[i + 1])
+
+
+def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, where=None):
+    """`_refine` over every pixel in chunks: the neighbour prior (τ finite) needs `valid`
+    (H, W) and the fitted pixels' flat indices `where` (their neighbours' current d0)."""
+    lo, hi, step, s_tab, ds_tab = table
+    n = obs.shape[0]
+    if valid is not None:
+        h, w = valid.shape
+        img = np.zeros(h * w)
+        img[where] = d0
+        nb, ok = _neighbours(img.reshape(h, w), valid)
+        nb, ok = nb.reshape(-1, 4)[where], ok.reshape(-1, 4)[where]
+    else:
+        nb, ok = np.zeros((n, 4)), np.zeros((n, 4), bool)
+    consts = (jnp.asarray(min(tau, 1e30)), jnp.asarray(gm), jnp.asarray(lo), jnp.asarray(hi),
+              jnp.asarray(lo), jnp.asarray(step), jnp.asarray(s_tab), jnp.asarray(ds_tab))
+    out = []
+    size = min(chunk, n)
+    for s in _chunks(n, size):
+        m = s.stop - s.start
+        r = _refine(*(jnp.asarray(_pad_to(a[s], size)) for a in (obs, sig, cens, d0, nb, ok)),
+                    *consts, steps=steps)
+        out.append([np.asarray(v)[:m] for v in r])
+        if bar is not None:
+            bar.update(m)
+    return [np.concatenate(v) for v in zip(*out)]
+
+
+def _progress(on, total):
+    if not on:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, unit="px", desc="fit_photo", leave=False)

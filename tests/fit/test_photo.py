@@ -141,15 +141,19 @@ def test_misfit_warns():
         assert res.reduced_chi2 > 4.0 and "does not explain" in res.warnings[0]
 
 
-def test_unknown_camera_from_reference_pads():
-    """A camera fitted as a 3 × 3 matrix on four pads of known thickness (Nikon 5100 data,
-    the model's bands are Stiles–Burch: Luther's condition fails, so not exact): median
-    error measured 1.3 nm (bound 5), ≥ 97 % within 15 nm; the matrix's rows sum to 1."""
+@pytest.mark.filterwarnings("ignore:reduced chi2")  # 11 on this 16-bit image: the basis
+def test_unknown_camera_from_reference_pads():  # is close, not exact, and the noise is tiny
+    """An unknown camera (the photograph made with Nikon 5100 data) fitted from five pads of
+    known thickness spanning the range. A 3 × 3 matrix on the observer's bands cannot match
+    a real camera (Luther's condition: measured median 5.8 nm, 73 % within 15 nm); the
+    sensitivities estimated on the hat basis from every pixel bring it to a median of 2.8 nm
+    (bound 5) with 98 % within 15 nm (bound 97 %). The reported 3 × 3 matrix maps white to
+    white (rows summing to 1)."""
     d = _ramp(100.0, 900.0)
     pads = {}
-    for i, t in enumerate((150.0, 300.0, 450.0, 620.0)):
+    for i, t in enumerate((120.0, 330.0, 540.0, 750.0, 880.0)):
         m = np.zeros_like(d, bool)
-        m[-4:, 10 * i:10 * i + 8] = True
+        m[-4:, 8 * i:8 * i + 6] = True
         d[m] = t
         pads[t] = m
     lin = tf.fit.photo.render_photo(OXIDE, d, camera="Nikon 5100 (NPL)", exposure=0.7)
@@ -158,11 +162,12 @@ def test_unknown_camera_from_reference_pads():
                        reference=[(m, t) for t, m in pads.items()],
                        thickness_range=(0.0, 1000.0), smoothness_nm=30.0)
     med, ok = _errors(res, d)
-    assert med < 5.0 and ok > 0.75, (med, ok)  # TODO(photo): richer unknown-camera model
+    assert med < 5.0 and ok > 0.97, (med, ok)
     np.testing.assert_allclose(res.camera_matrix.sum(axis=1), 1.0, rtol=1e-12)
+    assert abs(res.exposure / 0.7 - 1) < 0.05
     with pytest.raises(ValueError, match="at least 3 regions"):
         tf.fit_photo(img, OXIDE, camera="unknown", encoding="linear",
-                     reference=[(pads[150.0], 150.0), (pads[300.0], 300.0)])
+                     reference=[(pads[120.0], 120.0), (pads[330.0], 330.0)])
     with pytest.raises(ValueError, match="needs reference"):
         tf.fit_photo(img, OXIDE, camera="unknown", encoding="linear")
 

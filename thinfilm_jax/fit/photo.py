@@ -74,7 +74,7 @@ from ..core.image import Photo, read_mask, read_photo
 from ..core.material import as_stack
 from ..core.stack import Stack
 from ..optics.stack import stack_reflectance_traced
-from ..spectral.camera import Camera, camera_response
+from ..spectral.camera import Camera, camera_response, sensitivity_basis
 from .engine import covariance, levenberg_marquardt
 
 __all__ = ["PhotoResult", "fit_photo", "photo_colours", "render_photo"]
@@ -84,6 +84,9 @@ _CANDIDATES = 4  # local minima per pixel kept for the neighbour prior
 _EXPOSURE_LADDER = 2.0 ** np.arange(-2.0, 2.01, 0.5)  # × the brightness-matched exposure
 _SUBSAMPLE = 3000  # pixels for the gain search without references
 _GAIN_ROUNDS = 8  # alternations of the gains (an unknown camera's matrix) with the thicknesses
+_BASIS_ROUNDS = 3  # an unknown camera's sensitivities alternating with screened thicknesses
+_PAD_WEIGHT = 3.0  # × the equal-weight factor: the pads are known, the rest is fitted
+_BASIS_SMOOTHING = 1e-2  # the sensitivities' second-difference penalty (`_matrix_from_pixels`)
 _DISTINCT_NM = 15.0  # two local minima this far apart are different fringe orders
 
 
@@ -190,7 +193,7 @@ def photo_colours(template, thickness, *, camera: Camera, theta_o=0.0, alpha=Non
     d = np.asarray(thickness, float)
     s, _ = _colours(jnp.asarray(d.ravel()), stack, layer, jnp.asarray(cos), jnp.asarray(qw),
                     jnp.asarray(camera.wavelengths), jnp.asarray(camera.weights))
-    return np.asarray(s).reshape(*d.shape, 3)
+    return np.asarray(s).reshape(*d.shape, -1)
 
 
 def render_photo(template, thickness, *, camera="srgb", illuminant="D65", theta_o=0.0,
@@ -313,25 +316,31 @@ def _search_gains(obs, sig, cens, s_screen, grid, chunk):
     return best[1]
 
 
-def _reference_gains(obs_img, sig_img, cens_img, valid, reference, s_of, kind):
-    """(gains (3,), C (3, 3), C's stderr (3, 3)) from regions of known thickness."""
-    h, w = valid.shape
-    rows = []
-    for i, (mask, d) in enumerate(reference):
-        m = read_mask(mask, (h, w), name=f"reference[{i}] mask") & valid
+def _read_reference(reference, valid):
+    """[(mask (H, W) bool of usable pixels, thickness nm)] from the user's reference list."""
+    regions = []
+    for i, (mask, d) in enumerate(reference or ()):
+        m = read_mask(mask, valid.shape, name=f"reference[{i}] mask") & valid
         if not m.any():
             raise ValueError(f"reference[{i}] has no usable pixel (its mask is empty or all "
                              f"its pixels are clipped)")
         dv = float(d)
         if not np.isfinite(dv) or dv < 0:
             raise ValueError(f"reference[{i}] thickness must be finite and ≥ 0 nm, got {d}")
-        rows.append((obs_img[m], np.where(cens_img[m] == 0, sig_img[m], np.inf), s_of(dv)))
+        regions.append((m, dv))
+    return regions
+
+
+def _reference_gains(obs_img, sig_img, cens_img, regions, s_of, kind):
+    """(gains (3,), C (3, 3), C's stderr (3, 3)) from regions of known thickness."""
+    rows = [(obs_img[m], np.where(cens_img[m] == 0, sig_img[m], np.inf), s_of(d))
+            for m, d in regions]
     if kind != "unknown":
         o = np.concatenate([r[0] for r in rows])
         sg = np.concatenate([r[1] for r in rows])
         s = np.concatenate([np.broadcast_to(r[2], r[0].shape) for r in rows])
         return _closed_gains(o, sg, np.zeros(o.shape, int), s), np.eye(3), np.zeros((3, 3))
-    thick = sorted({round(float(d), 6) for _, d in reference})
+    thick = sorted({round(d, 6) for _, d in regions})
     s_ref = np.stack([r[2] for r in rows])
     sv = np.linalg.svd(s_ref, compute_uv=False) if len(rows) >= 3 else np.zeros(1)
     if len(thick) < 3 or sv[-1] < 1e-3 * sv[0]:
@@ -358,14 +367,21 @@ def _reference_gains(obs_img, sig_img, cens_img, valid, reference, s_of, kind):
     return g, m / g[:, None], se / g[:, None]
 
 
-def _matrix_from_pixels(obs, sig, cens, s_fit):
-    """M (3, 3) with o_c ≈ Σ_j M_cj s_j over every uncensored reading: per channel a
-    weighted linear least-squares fit (the unknown camera's self-calibration)."""
+def _matrix_from_pixels(obs, sig, cens, s_fit, smooth: float = 0.0):
+    """M (3, B) with o_c ≈ Σ_b M_cb s_b over every uncensored reading: per channel a
+    weighted linear least-squares fit (the unknown camera's self-calibration), with a
+    penalty `smooth` · tr(XᵀWX)/tr(DᵀD) · ‖D m_c‖² on the second differences D of the
+    coefficients (smooth sensitivities on a hat basis; 0 for the 3 × 3 matrix)."""
+    b = s_fit.shape[1]
+    d2 = np.diff(np.eye(b), 2, axis=0)
     rows = []
     for c in range(3):
         w = (cens[:, c] == 0) / sig[:, c]
-        coef, *_ = np.linalg.lstsq(s_fit * w[:, None], obs[:, c] * w, rcond=None)
-        rows.append(coef)
+        x = s_fit * w[:, None]
+        a = x.T @ x
+        reg = smooth * np.trace(a) / max(np.trace(d2.T @ d2), 1e-300)
+        rows.append(np.linalg.solve(a + reg * d2.T @ d2 + 1e-12 * np.trace(a) / b * np.eye(b),
+                                    x.T @ (obs[:, c] * w)))
     return np.stack(rows)
 
 
@@ -497,6 +513,8 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     lo, hi = _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor,
                          grid_step_nm, chi2_warn)
     cam = camera_response(camera, illuminant)
+    if not isinstance(reference, (list, tuple, type(None))):
+        raise ValueError("reference must be a list of (mask, thickness_nm) pairs")
     if cam.kind == "unknown" and not reference:
         raise ValueError("camera='unknown' needs reference regions of known thickness (at least "
                          "3 of distinct colour) to fit its 3 × 3 matrix")
@@ -520,12 +538,18 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     every = max(1, int(round(screen_step_nm / step)))
     coarse = np.unique(np.r_[np.arange(0, g_n, every), g_n - 1])
     cos, qw = _geometry(float(theta_o), alpha)
-    args = (stack, layer, jnp.asarray(cos), jnp.asarray(qw), jnp.asarray(cam.wavelengths),
-            jnp.asarray(cam.weights))
-    s_tab, ds_tab = (np.asarray(v) for v in _colours(jnp.asarray(grid), *args))
+    geom = (stack, layer, jnp.asarray(cos), jnp.asarray(qw))
+
+    def table_of(camera_: Camera):
+        s_tab, ds_tab = (np.asarray(v) for v in _colours(
+            jnp.asarray(grid), *geom, jnp.asarray(camera_.wavelengths),
+            jnp.asarray(camera_.weights)))
+        return (lo, hi, step, s_tab, ds_tab)
+
+    table = table_of(cam)
 
     def s_of(d):
-        return np.asarray(_colours(jnp.asarray([d]), *args)[0])[0]
+        return _host_hermite(np.asarray([d], float), lo, step, *table[3:])[0]
 
     # 2. gains
     where = np.flatnonzero(valid.ravel())
@@ -533,19 +557,28 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     sig = sig_img.reshape(-1, 3)[where]
     cens = cens_img.reshape(-1, 3)[where]
     n = obs.shape[0]
-    if reference:
-        gains, cmat, cmat_se = _reference_gains(photo.linear, sig_img, cens_img, valid,
-                                                reference, s_of, cam.kind)
+    regions = _read_reference(reference, valid)
+    known = np.full(h * w, np.nan)
+    for m, t in regions:
+        known[m.ravel()] = t
+    known = known[where]
+    pads = np.isfinite(known)
+    if regions:
+        gains, cmat, cmat_se = _reference_gains(photo.linear, sig_img, cens_img, regions,
+                                                s_of, cam.kind)
     else:
         cmat, cmat_se = np.eye(3), np.zeros((3, 3))
-        gains = _search_gains(obs, sig, cens, s_tab[coarse], jnp.asarray(grid[coarse]), chunk)
-    table = (lo, hi, step, s_tab, ds_tab)
+        gains = _search_gains(obs, sig, cens, table[3][coarse], jnp.asarray(grid[coarse]),
+                              chunk)
     tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
     k = _CANDIDATES
-    bar = _progress(progress, (3 + k) * n)
-    try:
-        # 3. screen: the k best local minima per pixel; 4. refine each of them
-        gm = gains[:, None] * cmat
+    rounds = _BASIS_ROUNDS if cam.kind == "unknown" else 0
+    bar = _progress(progress, (1 + k) * n * (1 + rounds) + 2 * n)
+
+    def orders(table, gm):
+        """3. screen: the k best distinct local minima per pixel; 4. refine each; choose
+        (best, or by the neighbour prior); → (d_best, d_alt, has_alt), pads at their d."""
+        s_tab = table[3]
         top, top_chi = _screen_all(obs, sig, cens, _features(s_tab[coarse] @ gm.T),
                                    jnp.asarray(grid[coarse]), k, chunk, bar)
         cand0 = grid[coarse][top]  # (n, k); a missing minimum repeats the pixel's best
@@ -562,29 +595,50 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
             pick = _icm(cd_img.reshape(h, w, k), cchi_img.reshape(h, w, k), valid,
                         tau).ravel()[where]
         rows = np.arange(n)
-        d_best = cd[rows, pick]
+        d_best = np.where(pads, known, cd[rows, pick])
         other = np.where(np.abs(cd - d_best[:, None]) >= _DISTINCT_NM, cchi, np.inf)
         alt = np.argmin(other, axis=-1)
         has_alt = np.isfinite(other[rows, alt])
-        d_alt = np.where(has_alt, cd[rows, alt], d_best)
-        # 5. gains once more from every pixel (no references); an unknown camera's matrix
-        #    from every pixel, alternating with the thicknesses (the pads anchor the orders);
-        #    then the final refine: the chosen thickness (with the neighbour prior) and the
-        #    other order (without)
-        for _ in range(_GAIN_ROUNDS if not reference or cam.kind == "unknown" else 0):
-            s_fit = _host_hermite(d_best, lo, step, s_tab, ds_tab)
-            if cam.kind == "unknown":
-                gm_new = _matrix_from_pixels(obs, sig, cens, s_fit)
-            else:
-                gm_new = _closed_gains(obs, sig, cens, s_fit @ cmat.T)[:, None] * cmat
+        return d_best, np.where(has_alt, cd[rows, alt], d_best), has_alt
+
+    def model_from_pixels(table, gm, d, kind):
+        s_fit = _host_hermite(d, lo, step, *table[3:])
+        if kind == "unknown":
+            return _matrix_from_pixels(obs, sig, cens, s_fit)
+        if kind == "basis":  # the pads, known, weigh as much as all other pixels together
+            up = np.sqrt(max((n - pads.sum()) / max(pads.sum(), 1), 1.0)) * _PAD_WEIGHT
+            return _matrix_from_pixels(obs, sig / np.where(pads, up, 1.0)[:, None], cens, s_fit,
+                                       smooth=_BASIS_SMOOTHING)
+        return _closed_gains(obs, sig, cens, s_fit @ cmat.T)[:, None] * cmat
+
+    try:
+        gm = gains[:, None] * cmat
+        d_best, d_alt, has_alt = orders(table, gm)
+        # 5. gains (no references), an unknown camera's matrix, from every pixel, alternating
+        #    with the thicknesses (the pads fixed at theirs) until they settle
+        for _ in range(_GAIN_ROUNDS if not regions or cam.kind == "unknown" else 0):
+            gm_new = model_from_pixels(table, gm, d_best, cam.kind)
             change = np.max(np.abs(gm_new - gm)) / np.max(np.abs(gm))
             gm = gm_new
-            d_best, _, _ = _refine_all(obs, sig, cens, d_best, None, np.inf, gm, table, steps,
-                                       chunk, None)
+            d_best = np.where(pads, known, _refine_all(obs, sig, cens, d_best, None, np.inf,
+                                                       gm, table, steps, chunk, None)[0])
             if change < 1e-8:
                 break
-        gains = gm.sum(axis=1) if cam.kind == "unknown" else np.diag(gm).copy()
-        cmat = gm / gains[:, None]
+        if cam.kind == "unknown":
+            # the 3 × 3 matrix on the observer's bands (reported), then the camera's
+            # sensitivities on a basis of hat functions (Luther's condition fails for real
+            # cameras: a 3 × 3 matrix cannot match them), from every pixel, re-screened
+            cmat3 = gm
+            if rounds:
+                table = table_of(sensitivity_basis(illuminant))
+            for _ in range(rounds):
+                gm = model_from_pixels(table, None, d_best, "basis")
+                d_best, d_alt, has_alt = orders(table, gm)
+            gains = gm.sum(axis=1)
+            cmat = cmat3 / cmat3.sum(axis=1)[:, None]
+        else:
+            gains = np.diag(gm).copy()
+        # the final refine: the chosen thickness (with the neighbour prior) and the other order
         d, chi, se = _refine_all(obs, sig, cens, d_best, valid if np.isfinite(tau) else None,
                                  tau, gm, table, steps, chunk, bar, where=where)
         _, chi_alt, _ = _refine_all(obs, sig, cens, d_alt, None, np.inf, gm, table, steps,

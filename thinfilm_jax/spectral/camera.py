@@ -26,7 +26,11 @@ Kinds of camera (`camera_response`):
   weight beyond). Real cameras
   violate Luther's condition (their sensitivities are not a linear map of colour-matching
   functions, Luther 1927), so that matrix has an error of its own, measured in the
-  photographs study.
+  photographs study. `fit_photo` then estimates the sensitivities themselves on a basis of
+  hat functions (`sensitivity_basis`: piecewise-linear Q_c(λ) through values at knots every
+  25 nm, 380–780 nm), which a thin film's spectra, rich in structure across its thicknesses,
+  determine (the spectral-sensitivity estimation of Jiang et al. 2013, with the film as the
+  target).
 
 Lights (`illuminant_spd`): a CIE illuminant name from ``colour.SDS_ILLUMINANTS`` or a measured
 spectrum (a ``colour.SpectralDistribution`` or an (M, 2) array of λ in nm and power). Data
@@ -54,7 +58,7 @@ import numpy as np
 from .spectra import DEFAULT_OBSERVER, get_observer
 
 __all__ = ["CAMERAS", "Camera", "camera_response", "illuminant_spd", "known_cameras",
-           "known_illuminants"]
+           "known_illuminants", "sensitivity_basis"]
 
 #: the kinds that are not a sensitivity table
 CAMERAS = ("srgb", "unknown")
@@ -170,6 +174,20 @@ def _sensitivities(camera):
         raise ValueError(f"camera sensitivities must be (K,) wavelengths and (K, 3) values, "
                          f"got {lam.shape} and {q.shape}")
     return "sensitivities", lam, q
+
+
+def sensitivity_basis(illuminant="D65", *, spacing_nm: float = 25.0) -> Camera:
+    """A `Camera` of kind "basis" whose B columns are hat functions on knots every
+    `spacing_nm` over 380–780 nm under the light (each column summing to 1): a camera with
+    piecewise-linear sensitivities reads s = A · (this camera's reading), A (3, B)."""
+    light, lam_e, power = illuminant_spd(illuminant)
+    lam = np.arange(380.0, 780.0 + _SRGB_STEP / 2, _SRGB_STEP)
+    knots = np.linspace(380.0, 780.0, int(round(400.0 / spacing_nm)) + 1)
+    hats = np.stack([np.interp(lam, knots, np.eye(knots.size)[b]) for b in range(knots.size)],
+                    axis=-1)
+    w = _trapezoid(lam)[:, None] * hats * _resample(lam_e, power, lam,
+                                                    f"illuminant {light}")[:, None]
+    return Camera("basis", "basis", light, lam, w / w.sum(axis=0))
 
 
 def camera_response(camera, illuminant="D65", *, observer: str = DEFAULT_OBSERVER) -> Camera:

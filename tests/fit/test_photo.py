@@ -125,7 +125,7 @@ def test_soap_srgb8_unknown_gains_and_censored_channels():
     med, ok = _errors(res, d)
     assert med < 1.0 and ok > 0.99
     assert abs(res.exposure / 3.0 - 1) < 0.01
-    assert res.reduced_chi2 < 2.0 and not any("reduced chi2" in w for w in res.warnings)
+    assert res.robust_chi2 < 2.0 and not any("reduced chi2" in w for w in res.warnings)
 
 
 def test_misfit_warns():
@@ -138,7 +138,7 @@ def test_misfit_warns():
                    {"encoding": "srgb", "template": tf.Film(0.0, 1.8, 1.0)}):
         with pytest.warns(UserWarning, match="reduced chi2"):
             res = tf.fit_photo(img, camera="srgb", **kwargs)
-        assert res.reduced_chi2 > 4.0 and "does not explain" in res.warnings[0]
+        assert res.robust_chi2 > 4.0 and "does not explain" in res.warnings[0]
 
 
 @pytest.mark.filterwarnings("ignore:reduced chi2")  # 11 on this 16-bit image: the basis

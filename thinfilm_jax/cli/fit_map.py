@@ -14,6 +14,9 @@ pixels per second warm and the compilation time separately (the warm-up batch's 
 minus its warm cost); with ``--free thickness
 eta_film`` also ``eta_film_map.npy``).
 
+With ``--camera`` the image is a photograph instead: `thinfilm_jax.cli.fit_photo` (encodings,
+cameras, lights, reference regions; its own outputs).
+
 ``--gltf DIR`` also writes the map as a complete glTF 2.0 asset, a sphere carrying the film
 (`thinfilm_jax.interop.gltf.write_gltf`, SPEC §10): ``DIR/fit_map.gltf`` with its mesh in
 ``DIR/fit_map.bin`` and a material with `KHR_materials_iridescence` (η₂ as `iridescenceIor`,
@@ -108,13 +111,16 @@ def add_parser(sub) -> None:
     p = sub.add_parser("fit-map", help="fit a per-pixel thickness map to an image",
                        description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("image", help="(H, W, 3) linear band radiances: .npy, .exr or .hdr")
-    view = p.add_mutually_exclusive_group(required=True)
+    p.add_argument("image", help="(H, W, 3) linear band radiances: .npy, .exr or .hdr; or a "
+                                 "photograph with --camera (PNG, JPEG, TIFF, EXR, RAW)")
+    view = p.add_mutually_exclusive_group()
     view.add_argument("--theta-o", dest="theta_o", type=float, metavar="DEG",
                       help="view angle of every pixel, degrees [0, 90]")
     view.add_argument("--theta-o-map", dest="theta_o_map", metavar="FILE.npy",
                       help="per-pixel view angles (H, W), degrees")
-    p.add_argument("--alpha", type=float, required=True, help="GGX roughness α in (0, 1]")
+    p.add_argument("--alpha", type=float,
+                   help="GGX roughness α in (0, 1] (band images: required; photographs: "
+                        "a rough film under uniform light, default a mirror view)")
     mat = " (a number, a bundled material such as SiO2, Si, or a .yml / .csv file)"
     p.add_argument("--eta-film", dest="eta_film_index", type=_index_arg(1.0, False),
                    required=True, metavar="N|NAME|FILE",
@@ -152,6 +158,9 @@ def add_parser(sub) -> None:
     p.add_argument("--gltf-bits", dest="gltf_bits", type=int, choices=[8, 16], default=8,
                    help="bits of the glTF thickness texture (8)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from .fit_photo import add_arguments
+
+    add_arguments(p)
     p.set_defaults(func=run_fit_map_cli, usage_error=p.error)
 
 
@@ -262,7 +271,22 @@ def run_fit_map_cli(args) -> int:
     before anything is read or fitted.
     """
     from ._checks import _devices, _enable_x64
+    from .fit_photo import PHOTO_SUFFIXES, run_photo
 
+    if getattr(args, "camera", None) is not None:
+        if args.theta_o_map is not None:
+            args.usage_error("argument --theta-o-map: a photograph has one view (--theta-o)")
+        if args.gltf is not None or "eta_film" in args.free:
+            args.usage_error("a photograph fits the thickness alone (no --free eta_film, no "
+                             "--gltf)")
+        return run_photo(args)
+    if Path(args.image).suffix.lower() in PHOTO_SUFFIXES or args.reference:
+        args.usage_error(f"{Path(args.image).name} is a photograph: give --camera (srgb, "
+                         f"unknown, a colour-science camera name or a sensitivities CSV)")
+    if args.theta_o is None and args.theta_o_map is None:
+        args.usage_error("one of the arguments --theta-o --theta-o-map is required")
+    if args.alpha is None:
+        args.usage_error("the following arguments are required: --alpha")
     if getattr(args, "gltf", None) is not None:
         problem = _gltf_problem(args)
         if problem is not None:

@@ -1,0 +1,199 @@
+"""``thinfilm-jax fit-map PHOTO --camera NAME ...``: a thickness map from a photograph
+(`thinfilm_jax.fit.photo.fit_photo`, SPEC §13).
+
+With ``--camera`` the image is a photograph: PNG, JPEG, TIFF (8 or 16 bit), EXR / HDR, or a
+camera RAW file (rawpy), decoded as ``--encoding`` says (srgb, linear, raw; the line printed
+first says which was assumed). The camera is a colour-science camera name, a CSV of
+sensitivities (header ``wavelength_nm,r,g,b``), ``srgb`` (a colorimetric sRGB image) or
+``unknown`` (fitted on ``--reference`` regions); the light is a CIE illuminant name
+(``--illuminant``, default D65) or a CSV spectrum (``wavelength_nm,power``). The film is
+``--eta-film`` on ``--eta-base`` (numbers or materials: ``--eta-film SiO2 --eta-base Si``),
+the unknown thickness its only layer. Exposure and white balance are always fitted.
+
+``--reference MASK.png:THICKNESS_NM`` (repeatable) names regions of known thickness: a mask
+image of the photograph's size (nonzero = inside), e.g. the bare substrate at 0 nm.
+
+Writes into ``--out`` (default ``fit_map``), each file atomically and only after the fit
+succeeded (a bad input leaves nothing behind): ``thickness.npy``, ``stderr.npy``,
+``ambiguous.npy`` (H, W), ``maps.exr`` (channels thickness, stderr, ambiguous), a PNG
+``thickness.png`` (the map with a colour bar, ambiguous pixels hatched) and
+``fit_photo.json`` (settings, exposure, white balance, camera matrix, reduced χ², residual
+summary, warnings, timing). A reduced χ² above 4 means the model does not explain the photo:
+the warning is printed and stored, and the exit status stays 0 (the files are written) unless
+``--strict``, which makes it exit 3.
+
+Example::
+
+    thinfilm-jax fit-map wafer.tif --camera "Nikon 5100 (NPL)" --encoding linear \\
+        --eta-film SiO2 --eta-base Si --reference bare.png:0 --thickness-range 0 1000
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+#: photograph suffixes that need --camera (the band-radiance path reads .npy/.exr/.hdr)
+PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
+#: exit status of --strict when the fit warns that the model does not explain the photo
+MISFIT_EXIT = 3
+
+
+def add_arguments(p) -> None:
+    """The photograph options of ``fit-map`` (`cli.fit_map.add_parser` calls this)."""
+    g = p.add_argument_group("photographs (SPEC §13; --camera selects this mode)")
+    g.add_argument("--camera", metavar="NAME|CSV|srgb|unknown",
+                   help="the camera: a colour-science name (e.g. 'Nikon 5100 (NPL)'), a CSV "
+                        "of sensitivities, srgb (a colorimetric sRGB image) or unknown "
+                        "(fitted on --reference regions)")
+    g.add_argument("--illuminant", default="D65", metavar="NAME|CSV",
+                   help="the light: a CIE illuminant name (D65) or a CSV spectrum")
+    g.add_argument("--encoding", choices=["srgb", "linear", "raw"],
+                   help="how the pixel values encode light (default: srgb for 8/16-bit "
+                        "files, linear for EXR/HDR, raw for camera RAW)")
+    g.add_argument("--bit-depth", dest="bit_depth", type=int, choices=[8, 16],
+                   help="the bit depth you expect (checked against the file)")
+    g.add_argument("--reference", action="append", default=[], metavar="MASK:NM",
+                   help="a region of known thickness: MASK.png:THICKNESS_NM (repeatable)")
+    g.add_argument("--mask", metavar="MASK.png", help="pixels to fit (default: all)")
+    g.add_argument("--strict", action="store_true",
+                   help=f"exit {MISFIT_EXIT} when the model does not explain the photograph")
+
+
+def _reference(specs) -> list:
+    out = []
+    for spec in specs:
+        path, sep, nm = spec.rpartition(":")
+        if not sep or not path:
+            raise ValueError(f"--reference {spec!r}: expected MASK.png:THICKNESS_NM")
+        try:
+            t = float(nm)
+        except ValueError:
+            raise ValueError(f"--reference {spec!r}: {nm!r} is not a thickness in nm") from None
+        if not Path(path).is_file():
+            raise ValueError(f"--reference {spec!r}: no such file {path}")
+        out.append((path, t))
+    return out
+
+
+def _illuminant(text: str):
+    if text.lower().endswith(".csv"):
+        path = Path(text)
+        if not path.is_file():
+            raise ValueError(f"--illuminant {text}: no such file")
+        a = np.genfromtxt(path, delimiter=",", names=True)
+        names = [n.lower() for n in a.dtype.names]
+        if names[:2] != ["wavelength_nm", "power"]:
+            raise ValueError(f"--illuminant {text}: the header must be wavelength_nm,power")
+        return np.stack([a[a.dtype.names[0]], a[a.dtype.names[1]]], axis=-1)
+    return text
+
+
+def _save_png(path: Path, d, amb, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..core._io import atomic_write
+
+    h, w = d.shape
+    fig, ax = plt.subplots(figsize=(5.4, 4.4 * h / max(w, 1) + 0.7))
+    im = ax.imshow(d, cmap="viridis", interpolation="nearest")
+    if amb.any():
+        ax.contourf(amb.astype(float), levels=[0.5, 1.5], colors="none", hatches=["////"])
+    ax.set_xlabel("x (pixel)")
+    ax.set_ylabel("y (pixel)")
+    ax.set_title(title, fontsize=7)
+    fig.colorbar(im, ax=ax, label="thickness (nm)")
+    fig.tight_layout()
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
+    plt.close(fig)
+
+
+def _save_exr(path: Path, maps) -> None:
+    import OpenImageIO as oiio
+
+    from ..core._io import atomic_write
+
+    data = np.ascontiguousarray(np.stack(maps, axis=-1).astype(np.float32))
+
+    def write(tmp):
+        spec = oiio.ImageSpec(data.shape[1], data.shape[0], data.shape[2], oiio.FLOAT)
+        spec.channelnames = ("thickness", "stderr", "ambiguous")
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), spec):
+            raise OSError(f"cannot write {path}: {oiio.geterror()}")
+        out.write_image(data)
+        out.close()
+
+    atomic_write(path, write, suffix=".exr")
+
+
+def run_photo(args) -> int:
+    """Fit, then write every output (module docstring); returns the exit status."""
+    import warnings
+
+    from ._checks import _enable_x64
+
+    image = Path(args.image)
+    if not image.is_file():
+        raise ValueError(f"PHOTO {image}: no such file")
+    reference = _reference(args.reference)
+    _enable_x64()
+    from ..core.film import Film
+    from ..fit.photo import fit_photo
+
+    template = Film(0.0, args.eta_film_index.value, args.eta_base_index.value,
+                    args.kappa_base, args.eta_outer_index.value)
+    alpha = getattr(args, "alpha", None)
+    theta = np.deg2rad(args.theta_o or 0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # printed below, from the result
+        res = fit_photo(str(image), template, camera=args.camera,
+                        illuminant=_illuminant(args.illuminant), encoding=args.encoding,
+                        bit_depth=args.bit_depth, reference=reference or None,
+                        theta_o=theta, alpha=alpha, thickness_range=tuple(args.thickness_range),
+                        smoothness_nm=args.smoothness, mask=args.mask,
+                        progress=not args.quiet)
+    print(f"read {res.encoding}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    from ..core._io import atomic_write, write_json
+
+    d, se, amb = res.thickness, res.stderr, res.ambiguous
+    for name, a in (("thickness", d), ("stderr", se), ("ambiguous", amb)):
+        atomic_write(out / f"{name}.npy", lambda tmp, a=a: np.save(tmp, a))
+    _save_exr(out / "maps.exr", (d, se, amb.astype(float)))
+    h, w = d.shape
+    title = (f"{image.name}: {w}×{h}, camera {res.camera}, {res.illuminant}, "
+             f"η₂={args.eta_film_index.text} on η₃={args.eta_base_index.text}, "
+             f"τ={args.smoothness or 'none'} nm\nreduced χ²={res.reduced_chi2:.3g}, "
+             f"exposure {res.exposure:.3g}; hatched: ambiguous fringe order")
+    _save_png(out / "thickness.png", d, amb, title)
+    summary = {"photo": str(image), "shape": [h, w],
+               "settings": {"camera": args.camera, "illuminant": args.illuminant,
+                            "encoding": args.encoding, "bit_depth": args.bit_depth,
+                            "reference": [f"{p}:{t:g}" for p, t in reference],
+                            "mask": args.mask, "eta_film": args.eta_film_index.text,
+                            "eta_base": args.eta_base_index.text,
+                            "theta_o_deg": args.theta_o or 0.0, "alpha": alpha,
+                            "thickness_range": list(args.thickness_range),
+                            "smoothness_nm": args.smoothness},
+               **res.summary(),
+               "outputs": ["thickness.npy", "stderr.npy", "ambiguous.npy", "maps.exr",
+                           "thickness.png", "fit_photo.json"]}
+    write_json(out / "fit_photo.json", summary)
+    ok = np.isfinite(d)
+    print(f"wrote {out}/thickness.png, maps.exr, thickness.npy, stderr.npy, ambiguous.npy, "
+          f"fit_photo.json: {int(ok.sum())} pixels, thickness {np.nanmin(d):.1f}–"
+          f"{np.nanmax(d):.1f} nm, median stderr {np.nanmedian(se):.2f} nm, "
+          f"{100 * amb.mean():.1f} % ambiguous; exposure {res.exposure:.4g}, white balance "
+          f"{np.round(res.white_balance, 4).tolist()}, reduced chi2 {res.robust_chi2:.3g} "
+          f"(robust; mean {res.reduced_chi2:.3g}); "
+          f"{res.pixels_per_second:.0f} pixels/s")
+    for note in res.warnings:
+        print(f"warning: {note}")
+    misfit = any("reduced chi2" in note for note in res.warnings)
+    return MISFIT_EXIT if misfit and args.strict else 0

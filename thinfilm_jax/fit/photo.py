@@ -90,6 +90,7 @@ _MODEL_FLOOR = 0.005  # relative model uncertainty (camera, light, material know
 _JPEG_FLOOR = 0.02  # … and of a lossy JPEG (quality 75–95: robust χ² 0.8–2.4 with it)
 _JPEG_SUFFIXES = (".jpg", ".jpeg")
 _CHI2_2_MEDIAN = 2.0 * np.log(2.0)  # the median of χ² with 2 degrees of freedom
+_GAIN_PIXELS = 16384  # pixels of the gain alternation (and every pad pixel)
 _GAIN_ROUNDS = 8  # alternations of the gains (an unknown camera's matrix) with the thicknesses
 _BASIS_ROUNDS = 3  # an unknown camera's sensitivities alternating with screened thicknesses
 _PAD_WEIGHT = 3.0  # × the equal-weight factor: the pads are known, the rest is fitted
@@ -398,8 +399,9 @@ def _matrix_from_pixels(obs, sig, cens, s_fit, smooth: float = 0.0):
 
 
 # ----------------------------------------------------------------------------- refine
-@functools.partial(jax.jit, static_argnames=("steps",))
-def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, steps):
+@functools.partial(jax.jit, static_argnames=("steps", "want_se"))
+def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, steps,
+            want_se):
     """Per pixel: Levenberg–Marquardt on [(g C s(d) − o)/σ, (d − d_q)/τ]; returns d, the
     data χ² and the standard error (absolute σ)."""
 
@@ -413,8 +415,8 @@ def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds
 
         x = levenberg_marquardt(res, x0[None], lo_d[None], hi_d[None], steps)
         r = data(x)
-        cov = covariance(data, x, absolute_sigma=True)
-        return x[0], jnp.sum(r * r), cov.stderr[0]
+        se = covariance(data, x, absolute_sigma=True).stderr[0] if want_se else x[0] * 0
+        return x[0], jnp.sum(r * r), se
 
     return jax.vmap(pixel)(obs, sig, cens, d0, nb, nb_ok)
 
@@ -619,29 +621,35 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         has_alt = np.isfinite(other[rows, alt])
         return d_best, np.where(has_alt, cd[rows, alt], d_best), has_alt
 
-    def model_from_pixels(table, gm, d, kind):
+    def model_from_pixels(table, gm, d, kind, sub=slice(None)):
         s_fit = _host_hermite(d, lo, step, *table[3:])
+        o, sg, cs, pd = obs[sub], sig[sub], cens[sub], pads[sub]
         if kind == "unknown":
-            return _matrix_from_pixels(obs, sig, cens, s_fit)
+            return _matrix_from_pixels(o, sg, cs, s_fit)
         if kind == "basis":  # the pads, known, weigh as much as all other pixels together
-            up = np.sqrt(max((n - pads.sum()) / max(pads.sum(), 1), 1.0)) * _PAD_WEIGHT
-            return _matrix_from_pixels(obs, sig / np.where(pads, up, 1.0)[:, None], cens, s_fit,
+            up = np.sqrt(max((pd.size - pd.sum()) / max(pd.sum(), 1), 1.0)) * _PAD_WEIGHT
+            return _matrix_from_pixels(o, sg / np.where(pd, up, 1.0)[:, None], cs, s_fit,
                                        smooth=_BASIS_SMOOTHING)
-        return _closed_gains(obs, sig, cens, s_fit @ cmat.T)[:, None] * cmat
+        return _closed_gains(o, sg, cs, s_fit @ cmat.T)[:, None] * cmat
 
     try:
         gm = gains[:, None] * cmat
         d_best, d_alt, has_alt = orders(table, gm)
         # 5. gains (no references), an unknown camera's matrix, from every pixel, alternating
         #    with the thicknesses (the pads fixed at theirs) until they settle
+        # (on a subsample: a handful of global parameters, then every pixel below)
+        sub = np.unique(np.r_[np.arange(0, n, max(1, n // _GAIN_PIXELS)), np.flatnonzero(pads)])
+        d_sub = d_best[sub]
         for _ in range(_GAIN_ROUNDS if not regions or cam.kind == "unknown" else 0):
-            gm_new = model_from_pixels(table, gm, d_best, cam.kind)
+            gm_new = model_from_pixels(table, gm, d_sub, cam.kind, sub)
             change = np.max(np.abs(gm_new - gm)) / np.max(np.abs(gm))
             gm = gm_new
-            d_best = np.where(pads, known, _refine_all(obs, sig, cens, d_best, None, np.inf,
-                                                       gm, table, steps, chunk, None)[0])
+            d_sub = np.where(pads[sub], known[sub], _refine_all(
+                obs[sub], sig[sub], cens[sub], d_sub, None, np.inf, gm, table, steps, chunk,
+                None)[0])
             if change < 1e-8:
                 break
+        d_best[sub] = d_sub
         if cam.kind == "unknown":
             # the 3 × 3 matrix on the observer's bands (reported), then the camera's
             # sensitivities on a basis of hat functions (Luther's condition fails for real
@@ -658,7 +666,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
             gains = np.diag(gm).copy()
         # the final refine: the chosen thickness (with the neighbour prior) and the other order
         d, chi, se = _refine_all(obs, sig, cens, d_best, valid if np.isfinite(tau) else None,
-                                 tau, gm, table, steps, chunk, bar, where=where)
+                                 tau, gm, table, steps, chunk, bar, where=where, want_se=True)
         _, chi_alt, _ = _refine_all(obs, sig, cens, d_alt, None, np.inf, gm, table, steps,
                                     chunk, bar)
         chi_alt = np.where(has_alt, chi_alt, np.inf)
@@ -720,7 +728,8 @@ def _host_hermite(d, lo, h, s, ds):
             + (-2 * t3 + 3 * t2) * s[i + 1] + (t3 - t2) * h * ds[i + 1])
 
 
-def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, where=None):
+def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, where=None,
+                want_se=False):
     """`_refine` over every pixel in chunks: the neighbour prior (τ finite) needs `valid`
     (H, W) and the fitted pixels' flat indices `where` (their neighbours' current d0)."""
     lo, hi, step, s_tab, ds_tab = table
@@ -740,7 +749,7 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
     for s in _chunks(n, size):
         m = s.stop - s.start
         r = _refine(*(jnp.asarray(_pad_to(a[s], size)) for a in (obs, sig, cens, d0, nb, ok)),
-                    *consts, steps=steps)
+                    *consts, steps=steps, want_se=want_se)
         out.append([np.asarray(v)[:m] for v in r])
         if bar is not None:
             bar.update(m)

@@ -444,6 +444,9 @@ def score(res, truth, exclude) -> dict:
         "ambiguous_pct": float(100 * amb.mean()),
         "wrong_order_flagged_pct": float(100 * amb[~right].mean()) if (~right).any() else None,
         "right_order_flagged_pct": float(100 * amb[right].mean()) if right.any() else None,
+        "wrong_alternative_is_truth_pct": float(100 * np.mean(
+            np.abs(np.asarray(res.alternative)[ok][~right] - truth[ok][~right])
+            < RIGHT_ORDER_NM)) if (~right).any() else None,
         "right_within_2_stderr_pct": float(100 * np.mean(a[right] <= 2 * se[right]))
         if right.any() else None,
         "median_stderr_nm": float(np.median(se)),

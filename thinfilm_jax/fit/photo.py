@@ -48,6 +48,13 @@ The fit, in the order it runs:
    explain the photograph (wrong encoding, camera, light, angle or material). It is robust
    so that a few outlying pixels (an edge, a scratch) do not raise it.
 
+Limits. Colours depend on the film's index and thickness mostly through n₂·d: with the wrong
+film index the map scales by the ratio of the indices while χ² barely rises (SiO₂ declared
+for a soap film: the map 9 % thin, robust χ² 0.8, no warning), so the material must be
+known. Where the noise makes two fringe orders equally likely the fit takes the one with the
+lower χ², which may be wrong: `ambiguous` flags those pixels, and `alternative` holds the
+other order.
+
 Example (an sRGB rendering of an oxide wedge on silicon, exposure and white balance unknown):
     >>> import numpy as np
     >>> from thinfilm_jax import Film, refractive_index
@@ -92,7 +99,8 @@ _SUBSAMPLE = 3000  # pixels for the gain search without references
 #: the model floor, at 1/16 of the cost
 _QUADRATURE = (12, 12)
 _MODEL_FLOOR = 0.005  # relative model uncertainty (camera, light, material known so well)
-_JPEG_FLOOR = 0.02  # … and of a lossy JPEG (quality 75–95: robust χ² 0.8–2.4 with it)
+_JPEG_FLOOR = 0.02  # … of a lossy JPEG, in the misfit statistics (quality 75–95: robust χ²
+_JPEG_BLACK_CODES = 6  # 0.8–2.4 with it); codes ≤ this of a JPEG channel are black-clipped
 _JPEG_SUFFIXES = (".jpg", ".jpeg")
 _CHI2_2_MEDIAN = 2.0 * np.log(2.0)  # the median of χ² with 2 degrees of freedom
 _GAIN_PIXELS = 16384  # pixels of the gain alternation (and every pad pixel)
@@ -248,7 +256,8 @@ def _screen(obs, sig, cens, feats, grid, k):
 
     Channels censored at 0 or at full scale (`cens` 1 / 2) cost only on the wrong side
     (`_residual`). χ² is one matrix product: pixel terms (P, 12) against the grid's
-    `feats` (G, 12) = [pred², pred, relu(pred)², relu(1 − pred)²] per channel, plus Σ w o²."""
+    `feats` (G, 12) = [pred², pred, relu(pred − b)², relu(1 − pred)²] per channel (b the
+    black level, `_censoring`), plus Σ w o²."""
     w = 1.0 / (sig * sig)  # (P, 3)
     wu, wl, wh = (w * (cens == c).astype(w.dtype) for c in (0, 1, 2))
     a = jnp.concatenate([wu, -2.0 * obs * wu, wl, wh], axis=-1)  # (P, 12)
@@ -267,18 +276,20 @@ def _screen(obs, sig, cens, feats, grid, k):
     return jnp.stack(tops, -1), jnp.stack(chis, -1)
 
 
-def _features(pred):
-    """(G, 12) grid terms of `_screen` from the predictions (G, 3)."""
+def _features(pred, black):
+    """(G, 12) grid terms of `_screen` from the predictions (G, 3) and the black level."""
     relu = np.maximum
-    return jnp.asarray(np.concatenate([pred * pred, pred, relu(pred, 0.0) ** 2,
+    return jnp.asarray(np.concatenate([pred * pred, pred, relu(pred - black, 0.0) ** 2,
                                        relu(1.0 - pred, 0.0) ** 2], axis=-1))
 
 
-def _residual(pred, o, sg, cens):
-    """(pred − o)/σ per channel; a channel censored at 0 (1) costs relu(pred)/σ, one at full
-    scale (2) relu(1 − pred)/σ: a clipped reading says only on which side the truth is."""
+def _residual(pred, o, sg, cens, black):
+    """(pred − o)/σ per channel; a channel censored at black (1) costs relu(pred − b)/σ, one
+    at full scale (2) relu(1 − pred)/σ: a clipped reading says only on which side the truth
+    is (b the black level, `_censoring`)."""
     return jnp.where(cens == 0, pred - o,
-                     jnp.where(cens == 1, jax.nn.relu(pred), jax.nn.relu(1.0 - pred))) / sg
+                     jnp.where(cens == 1, jax.nn.relu(pred - black),
+                               jax.nn.relu(1.0 - pred))) / sg
 
 
 def _chunks(n, size):
@@ -312,7 +323,7 @@ def _closed_gains(obs, sig, cens, s_c):
     return np.sum(obs * s_c * w, axis=0) / np.maximum(np.sum(s_c * s_c * w, axis=0), 1e-300)
 
 
-def _search_gains(obs, sig, cens, s_screen, grid, chunk):
+def _search_gains(obs, sig, cens, s_screen, grid, chunk, black):
     """Gains without references (module docstring, step 2): alternating minimisation from a
     ladder of exposures around the brightness-matched one, on a subsample, on the screen
     grid's colours `s_screen` (G, 3)."""
@@ -323,7 +334,8 @@ def _search_gains(obs, sig, cens, s_screen, grid, chunk):
     for e in e0 * _EXPOSURE_LADDER:
         g = np.full(3, e)
         for _ in range(8):
-            idx, chi = _screen_all(o, sg, cs, _features(s_screen * g), grid, 1, chunk, None)
+            idx, chi = _screen_all(o, sg, cs, _features(s_screen * g, black), grid, 1, chunk,
+                                   None)
             g_new = _closed_gains(o, sg, cs, s_screen[idx[:, 0]])
             if np.allclose(g_new, g, rtol=1e-4):
                 break
@@ -405,7 +417,8 @@ def _matrix_from_pixels(obs, sig, cens, s_fit, smooth: float = 0.0):
 
 # ----------------------------------------------------------------------------- refine
 @functools.partial(jax.jit, static_argnames=("steps", "want_se"))
-def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, steps,
+def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, black,
+            steps,
             want_se):
     """Per pixel: Levenberg–Marquardt on [(g C s(d) − o)/σ, (d − d_q)/τ]; returns d, the
     data χ² and the standard error (absolute σ)."""
@@ -413,7 +426,7 @@ def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds
     def pixel(o, sg, cs, x0, q, ok):
         def data(x):
             pred = jnp.matmul(gm, _hermite(x[0], lo, h, s_tab, ds_tab), precision=_HI)
-            return _residual(pred, o, sg, cs)
+            return _residual(pred, o, sg, cs, black)
 
         def res(x):
             return jnp.concatenate([data(x), jnp.where(ok, (x[0] - q) / tau, 0.0)])
@@ -477,12 +490,19 @@ def _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor, gri
     return lo, hi
 
 
-def _censoring(photo: Photo) -> np.ndarray:
-    """(H, W, 3) per channel: 0 a reading, 1 clipped at black (a value ≤ 0), 2 clipped at full
-    scale (≥ 1, for integer or sRGB-encoded sources; linear float data have no ceiling)."""
+def _censoring(photo: Photo, lossy: bool) -> tuple[np.ndarray, float]:
+    """((H, W, 3) per channel: 0 a reading, 1 clipped at black, 2 clipped at full scale (≥ 1,
+    for integer or sRGB-encoded sources; linear float data have no ceiling); the black level
+    b). b = 0, except for a lossy (JPEG) file, whose DCT rings a clipped channel up to a few
+    codes: b is the linear value of `_JPEG_BLACK_CODES` / 255 there."""
     v = photo.linear
+    black = 0.0
+    if lossy:
+        code = _JPEG_BLACK_CODES / 255.0
+        black = float(np.asarray(code / 12.92 if photo.encoding == "srgb" else code))
     ceiling = photo.bit_depth is not None or photo.encoding == "srgb"
-    return np.where(v <= 0, 1, np.where(ceiling & (v >= 1.0), 2, 0)).astype(np.int32)
+    cens = np.where(v <= black, 1, np.where(ceiling & (v >= 1.0), 2, 0)).astype(np.int32)
+    return cens, black
 
 
 def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srgb",
@@ -512,8 +532,10 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         thickness_range: (lo, hi) nm, the screen's range; layer: which layer is unknown.
         smoothness_nm: τ of the neighbour prior that chooses fringe orders (None: per pixel).
         mask: (H, W) bool or a mask image: pixels to fit (default all unclipped pixels).
-        model_floor: relative model uncertainty f (None: 0.005, or 0.02 for a JPEG file,
-            whose chroma subsampling and DCT quantisation err by about that much);
+        model_floor: relative model uncertainty f (None: 0.005; for a JPEG file the misfit
+            statistics use 0.02, as its chroma subsampling and DCT quantisation err by about
+            that much, while the fit keeps 0.005, since a floor that large would skew the
+            channels' relative weights and so the white balance);
         grid_step_nm: the table's step;
         screen_step_nm: the screen grid's step (a multiple of grid_step_nm; every basin of
             χ²(d) must hold a grid point: fringes are ≳ 100 nm wide);
@@ -532,9 +554,10 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
             argument out of range.
     """
     t0 = time.perf_counter()
-    if model_floor is None:
-        jpeg = isinstance(image, (str, Path)) and Path(image).suffix.lower() in _JPEG_SUFFIXES
-        model_floor = _JPEG_FLOOR if jpeg else _MODEL_FLOOR
+    jpeg = isinstance(image, (str, Path)) and Path(image).suffix.lower() in _JPEG_SUFFIXES
+    report_floor = _JPEG_FLOOR if jpeg and model_floor is None else model_floor
+    model_floor = _MODEL_FLOOR if model_floor is None else model_floor
+    report_floor = model_floor if report_floor is None else report_floor
     lo, hi = _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor,
                          grid_step_nm, chi2_warn)
     cam = camera_response(camera, illuminant)
@@ -547,14 +570,17 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
                          layer)
     photo: Photo = read_photo(image, encoding, bit_depth=bit_depth)
     h, w, _ = photo.linear.shape
-    cens_img = _censoring(photo)
+    cens_img, black = _censoring(photo, jpeg)
     valid = ~np.all(cens_img > 0, axis=-1)
     if mask is not None:
         valid &= read_mask(mask, (h, w), name="mask")
     if not valid.any():
         raise ValueError("no pixel to fit: every pixel is clipped or outside the mask")
-    sig_img = np.sqrt(photo.noise ** 2 + (model_floor * photo.linear) ** 2
-                      + (1e-6 * max(float(photo.linear.max()), 1e-12)) ** 2)
+    def sigma(floor):
+        return np.sqrt(photo.noise ** 2 + (floor * photo.linear) ** 2
+                       + (1e-6 * max(float(photo.linear.max()), 1e-12)) ** 2)
+
+    sig_img = sigma(model_floor)
 
     # 1. the table (fine, for the interpolant) and the screen grid (every m-th point)
     g_n = int(np.ceil((hi - lo) / grid_step_nm)) + 1
@@ -569,12 +595,12 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         s_tab, ds_tab = (np.asarray(v) for v in _colours(
             jnp.asarray(grid), *geom, jnp.asarray(camera_.wavelengths),
             jnp.asarray(camera_.weights)))
-        return (lo, hi, step, s_tab, ds_tab)
+        return (lo, hi, step, s_tab, ds_tab, black)
 
     table = table_of(cam)
 
     def s_of(d):
-        return _host_hermite(np.asarray([d], float), lo, step, *table[3:])[0]
+        return _host_hermite(np.asarray([d], float), lo, step, *table[3:5])[0]
 
     # 2. gains
     where = np.flatnonzero(valid.ravel())
@@ -594,7 +620,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     else:
         cmat, cmat_se = np.eye(3), np.zeros((3, 3))
         gains = _search_gains(obs, sig, cens, table[3][coarse], jnp.asarray(grid[coarse]),
-                              chunk)
+                              chunk, black)
     tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
     k = _CANDIDATES
     rounds = _BASIS_ROUNDS if cam.kind == "unknown" else 0
@@ -604,7 +630,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         """3. screen: the k best distinct local minima per pixel; 4. refine each; choose
         (best, or by the neighbour prior); → (d_best, d_alt, has_alt), pads at their d."""
         s_tab = table[3]
-        top, top_chi = _screen_all(obs, sig, cens, _features(s_tab[coarse] @ gm.T),
+        top, top_chi = _screen_all(obs, sig, cens, _features(s_tab[coarse] @ gm.T, black),
                                    jnp.asarray(grid[coarse]), k, chunk, bar)
         cand0 = grid[coarse][top]  # (n, k); a missing minimum repeats the pixel's best
         cand0 = np.where(np.isfinite(top_chi), cand0, cand0[:, :1])
@@ -627,7 +653,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         return d_best, np.where(has_alt, cd[rows, alt], d_best), has_alt
 
     def model_from_pixels(table, gm, d, kind, sub=slice(None)):
-        s_fit = _host_hermite(d, lo, step, *table[3:])
+        s_fit = _host_hermite(d, lo, step, *table[3:5])
         o, sg, cs, pd = obs[sub], sig[sub], cens[sub], pads[sub]
         if kind == "unknown":
             return _matrix_from_pixels(o, sg, cs, s_fit)
@@ -680,13 +706,21 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         if bar is not None:
             bar.close()
 
-    # 5. uncertainty, ambiguity, warnings
+    # 5. uncertainty, ambiguity, warnings. The fit's own χ² scales the standard errors and
+    #    the ambiguity test; the misfit statistics use the reporting floor (a JPEG's 2 %,
+    #    which, applied in the fit, would skew the channels' weights and so the white balance)
     n_global = 3 + (6 if cam.kind == "unknown" else 0)
     dof = max(2 * n - n_global, 1)
+    robust_fit = float(np.median(chi) / _CHI2_2_MEDIAN)
+    scale = np.sqrt(robust_fit)
+    amb = np.isfinite(chi_alt) & (chi_alt - chi < 4.0 * max(robust_fit, 1.0))
+    if report_floor != model_floor:
+        pred = _host_hermite(d, lo, step, *table[3:5]) @ gm.T
+        sig_rep = sigma(report_floor).reshape(-1, 3)[where]
+        chi = np.sum(np.asarray(_residual(jnp.asarray(pred), jnp.asarray(obs), jnp.asarray(sig_rep),
+                                          jnp.asarray(cens), black)) ** 2, axis=-1)
     rchi2 = float(np.sum(chi) / dof)
     robust = float(np.median(chi) / _CHI2_2_MEDIAN)
-    scale = np.sqrt(robust)
-    amb = np.isfinite(chi_alt) & (chi_alt - chi < 4.0 * max(rchi2, 1.0))
     notes = []
     if robust > chi2_warn:
         notes.append(f"reduced chi2 = {robust:.3g} (robust; mean {rchi2:.3g}) > {chi2_warn:g}: "
@@ -737,7 +771,7 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
                 want_se=False):
     """`_refine` over every pixel in chunks: the neighbour prior (τ finite) needs `valid`
     (H, W) and the fitted pixels' flat indices `where` (their neighbours' current d0)."""
-    lo, hi, step, s_tab, ds_tab = table
+    lo, hi, step, s_tab, ds_tab, black = table
     n = obs.shape[0]
     if valid is not None:
         h, w = valid.shape
@@ -748,7 +782,8 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
     else:
         nb, ok = np.zeros((n, 4)), np.zeros((n, 4), bool)
     consts = (jnp.asarray(min(tau, 1e30)), jnp.asarray(gm), jnp.asarray(lo), jnp.asarray(hi),
-              jnp.asarray(lo), jnp.asarray(step), jnp.asarray(s_tab), jnp.asarray(ds_tab))
+              jnp.asarray(lo), jnp.asarray(step), jnp.asarray(s_tab), jnp.asarray(ds_tab),
+              jnp.asarray(black))
     out = []
     size = min(chunk, n)
     for s in _chunks(n, size):

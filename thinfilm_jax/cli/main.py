@@ -60,6 +60,10 @@ def _bench(args) -> int:
         from ..studies import materials_study as ms
 
         ms.run(ms.MaterialsConfig.tiny() if args.quick else ms.MaterialsConfig(), out=args.out)
+    if args.suite in ("photo", "all"):
+        from ..studies import photo_study
+
+        photo_study.run(out=args.out, quick=args.quick)
     return 0
 
 
@@ -233,7 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default="figures", help="output folder (default: figures)")
     b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "models",
-                                       "colour_table", "materials", "all"],
+                                       "colour_table", "materials", "photo", "all"],
                    default="core",
                    help="core: error vs run time, peers, specialisation (default); ibl: the "
                         "2560×1440 IBL frame and the real-time options' errors; scaling: the "
@@ -245,7 +249,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "colour table against filtered, improved and the reference per map "
                         "(figures/colour_table.*); materials: colour charts of films on "
                         "silicon, constant vs dispersive Si, the real-time methods on "
-                        "dispersive films (figures/materials.*); all: the seven")
+                        "dispersive films (figures/materials.*); photo: thickness maps from "
+                        "synthetic photographs and fit_spectrum against optifik "
+                        "(figures/photo_study.*); all: the eight")
     b.set_defaults(func=_bench)
 
     from ..shading.envmap import SHIPPED

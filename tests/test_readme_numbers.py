@@ -54,7 +54,7 @@ FIGURES = ROOT / "figures"
 PAGES = ("studies/figure7.md", "studies/ibl.md", "studies/improved.md",
          "studies/classic-models.md", "theory/accuracy.md", "studies/fitting.md",
          "studies/error-runtime.md", "studies/performance.md", "how-to/devices.md",
-         "studies/scaling.md", "getting-started/conventions.md")
+         "studies/scaling.md", "getting-started/conventions.md", "studies/photographs.md")
 _MARK = re.compile(r"\n\n<!-- page: (\S+) -->\n\n")
 
 
@@ -424,6 +424,12 @@ def _ibl_markdown():
     return markdown(artifact("ibl_bench.json"))
 
 
+def _photo_markdown():
+    from thinfilm_jax.studies.photo_study import markdown
+
+    return markdown(artifact("photo_study.json"))
+
+
 def _ibl_vs_ideal(name):
     rows = artifact("ibl_bench.json")["throughput"]
     return next(r for r in rows if r["name"] == name)["vs_ideal"]
@@ -725,6 +731,9 @@ SPECS = [
              ("bench.json",), lambda: [artifact("bench.json")["m_selection"]["exact"][
                  "smallest_M_dE_max_below_1_theta_le_80deg"]]),
     Verbatim("| grid | airy value µs |", ("peers.json",), _peers_markdown),
+    Verbatim("| case | median \\|err\\| nm | p95 nm |", ("photo_study.json",), _photo_markdown),
+    Verbatim("| case | against | median", ("photo_study.json",), _photo_markdown),
+    Verbatim("| d nm | fringes | spectrum |", ("photo_study.json",), _photo_markdown),
     Sentence(r"`thin_film_tmm` disagrees with `tmm` by up to (\S+) for absorbing", ("peers.json",),
              lambda: [max(g["max_abs_diff"]["colour_vs_tmm"]
                           for g in artifact("peers.json")["grids"].values())]),

@@ -9,6 +9,7 @@ dominates the run time: the fits below share configurations where they can (same
 
 import json
 import os
+import warnings
 from pathlib import Path
 
 import jax
@@ -20,6 +21,7 @@ from thinfilm_jax import Film, airy_reflectance
 from thinfilm_jax.cli.main import main as cli_main
 from thinfilm_jax.fit.film_fit import (DEFAULT_BOUNDS, FitOptions, FitResult, _to_x, _to_y, fit_film,
                               fit_spectrum, patch_model, spectrum_model)
+from thinfilm_jax.fit.options import MisfitWarning
 from thinfilm_jax.shading.patch import patch_radiance
 
 FIG7 = Film(600.0, 1.3, 2.0, 0.5)  # Kneiphof et al. 2019 Figure 7 film (SPEC §7)
@@ -115,10 +117,15 @@ def test_fit_four_film_parameters(fig7_obs):
 
 
 def test_stderr_in_physical_units(fig7_obs):
-    """stderr is √diag(s²(JᵀJ)⁻¹) with J taken in the physical parameters (nm, not logit)."""
+    """stderr is √diag(s²(JᵀJ)⁻¹) with J taken in the physical parameters (nm, not logit);
+    with the noise σ given (which s² makes no difference to), the reduced χ² is Σ(r/σ)²/(n − 1)
+    and the right film raises no misfit warning."""
     rng = np.random.default_rng(3)
     obs = fig7_obs + 1e-3 * rng.standard_normal(fig7_obs.shape)
-    res = fit_film(obs, THETA, alpha=ALPHA, initial=FIG7._replace(thickness=350.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MisfitWarning)
+        res = fit_film(obs, THETA, alpha=ALPHA, initial=FIG7._replace(thickness=350.0),
+                       sigma=1e-3)
     d = float(res.film.thickness)
     jac = jax.jacfwd(lambda t: patch_model(FIG7._replace(thickness=t), THETA, ALPHA)
                      .reshape(-1))(jnp.asarray(d))
@@ -127,6 +134,8 @@ def test_stderr_in_physical_units(fig7_obs):
     np.testing.assert_allclose(float(res.stderr["thickness"]), np.sqrt(s2 / (jac @ jac)),
                                rtol=1e-6)
     assert abs(d - 600.0) < 4 * float(res.stderr["thickness"]) + 0.05
+    np.testing.assert_allclose(float(res.reduced_chi2), s2 / 1e-6, rtol=1e-9)
+    assert res.warnings == ()
 
 
 def test_gradient_through_fit_film():
@@ -224,6 +233,35 @@ def test_box_map_round_trip_and_bounds():
     xs = _to_x(y, lo, hi)
     assert bool(jnp.all((xs >= lo) & (xs <= hi)))
     assert bool(jnp.all(jnp.isfinite(jax.vmap(jax.grad(lambda t: _to_x(t, lo, hi)))(y))))
+
+
+def test_misfit_warning(spectra):
+    """σ given: `reduced_chi2` = Σ((R(fit) − o)/σ)²/(n − p), recomputed here with
+    `airy_reflectance`; spectra of the film with noise σ fit to ≈ 1 (ν = 242: the 99.9 %
+    point of χ²_ν/ν is 1.30, the sd 0.09) and raise nothing; spectra of a base η₃ = 3.5
+    fitted with η₃ = 3.9 (the wrong material) cannot be explained within σ: reduced χ² ≫ 1,
+    a `MisfitWarning`. Without σ there is no scale: NaN, no warning. (Same compiled fit as
+    `test_fit_spectrum_thickness`.)"""
+    sd = 1e-3
+    rng = np.random.default_rng(11)
+    init = SPEC_FILM._replace(thickness=750.0)
+    noisy = spectra + sd * rng.standard_normal(spectra.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MisfitWarning)
+        res = fit_spectrum(noisy, LAMBDA, COS, initial=init, sigma=sd)
+        plain = fit_spectrum(noisy, LAMBDA, COS, initial=init)
+    r = (np.asarray(airy_reflectance(res.film, COS[:, None], LAMBDA)) - noisy) / sd
+    np.testing.assert_allclose(float(res.reduced_chi2), np.sum(r * r) / (r.size - 1),
+                               rtol=1e-9)
+    assert 0.7 < float(res.reduced_chi2) < 1.3 and res.warnings == ()
+    assert np.isnan(float(plain.reduced_chi2)) and plain.warnings == ()
+    wrong = np.asarray(airy_reflectance(SPEC_FILM._replace(eta_base=3.5), COS[:, None],
+                                        LAMBDA)) + sd * rng.standard_normal(spectra.shape)
+    with pytest.warns(MisfitWarning, match="does not explain the data within the noise"):
+        bad = fit_spectrum(wrong, LAMBDA, COS, initial=init, sigma=sd)
+    assert float(bad.reduced_chi2) > 100.0
+    assert len(bad.warnings) == 1 and "reduced χ²" in bad.warnings[0]
+    assert bad.to_dict()["warnings"] == list(bad.warnings)
 
 
 def test_fitted_values_stay_in_bounds(spectra):

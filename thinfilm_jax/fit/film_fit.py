@@ -8,7 +8,11 @@ Two problems, one machinery:
   film metrology) → the free film parameters.
 
 Both minimise $\tfrac12\sum_k r_k^2$ with weighted residuals $r_k = (m_k(x) - o_k)/\sigma_k$
-(σ = 1 unless given) with optimistix (`optx.least_squares`, Levenberg–Marquardt by default).
+(σ = 1 unless given) with Levenberg–Marquardt by default: the library's one implementation,
+`engine.lm_solve` (the map fits run it too), stopped by optimistix's Cauchy test
+(`FitOptions.rtol`, `atol`); optimistix's other solvers by name (`SOLVERS`). With `sigma`
+given, `FitResult.reduced_chi2` and the misfit warning (`options` module docstring) say
+whether the model explains the data within the noise.
 
 **Materials (SPEC §12).** `initial` is a constant `Film` (the Airy model, the names
 `PARAMS`), a `Film` with index models or a `Stack`: the model is then the stack code with
@@ -53,7 +57,7 @@ wrong one. When the thickness is free the solve is multi-start, in these stages:
    thickness η₂ d and ± one order (the data fix η₂ d far better than η₂).
 3. *polish*: the 1 + `n_alternatives` (3) best *distinct* minima (thickness more than a
    quarter order apart), ranked by the final model, are solved to convergence with it
-   (`max_steps`, implicit adjoint); the best is the answer, the others are reported as
+   (`max_steps`, implicit derivatives); the best is the answer, the others are reported as
    runner-ups (`FitResult.runner_up_params`, `.runner_up_loss`, `.runner_up_dchi2` =
    Δχ² against the answer) and `FitResult.ambiguous` flags a runner-up with Δχ² < 9 (the
    data cannot tell the fringe orders apart).
@@ -66,9 +70,9 @@ orders), and stage 3 `refine_method` (default: `method`) at `quadrature`. So
 with the real-time path (~100× cheaper) and measures with the reference.
 
 **Batching.** The starts are batched with `jax.vmap` on accelerators and with a sequential
-`jax.lax.map` on CPU (``batching="auto"``; "vmap" / "map" force one): a vmapped
-`optx.least_squares` runs every start until the slowest has finished and, on CPU, compiles
-~3× slower for no parallel gain.
+`jax.lax.map` on CPU (``batching="auto"``; "vmap" / "map" force one): a vmapped solve
+(a batched `while_loop`) runs every start until the slowest has finished, for no parallel
+gain on CPU.
 
 **Quadrature.** `patch_one`'s deterministic half-vector quadrature at n_u = n_φ = 16 (the
 fit default; 256 nodes) is within ~1e-5 of the converged reference for θ_o ≤ 80°,
@@ -82,21 +86,23 @@ directly by forward-mode AD in x),
 
 $$ \operatorname{cov} = s^2 (J^T J)^{-1},\qquad s^2 = \frac{\sum_k r_k^2}{n - p} $$
 
-(`absolute_sigma=True` uses s² = 1, i.e. σ are true standard deviations). Standard errors
-are √diag(cov); the correlation matrix flags trade-offs (thickness vs film IOR for thin
-films; η₃ vs κ₃ from RGB patch colours): `FitResult.degenerate` lists the pairs
-with |corr| > 0.95. The linearised errors are meaningful only at a converged optimum in
-the right fringe order.
+(`engine.covariance`; `absolute_sigma=True` uses s² = 1, i.e. σ are true standard
+deviations). Standard errors are √diag(cov); the correlation matrix flags trade-offs
+(thickness vs film IOR for thin films; η₃ vs κ₃ from RGB patch colours):
+`FitResult.degenerate` lists the pairs with |corr| > 0.95. The linearised errors are
+meaningful only at a converged optimum in the right fringe order.
 
-**Gradients.** The final solve runs under optimistix's implicit adjoint, so e.g.
-``jax.grad(lambda o: fit_film(o, ...).film.thickness)`` differentiates the fitted value
-with respect to the observations (implicit function theorem at the optimum); the
+**Gradients.** The final solve's solution carries the implicit-function-theorem
+derivatives (`engine.implicit_solution`; optimistix's implicit adjoint for its solvers),
+so e.g. ``jax.grad(lambda o: fit_film(o, ...).film.thickness)`` differentiates the fitted
+value with respect to the observations (implicit function theorem at the optimum); the
 multi-start stage is under `stop_gradient`.
 """
 
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -123,9 +129,22 @@ from ..spectral.lut import build_shat_lut
 from ..spectral.reflectance import band_centroids, band_film, stack_bands
 from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 from . import params as P
-from .options import (_PATCH_ONLY, _START_MARGIN, BATCHING, DEFAULT_BOUNDS, DEFAULT_N_STARTS,
-                      DEFAULT_N_STARTS_LAYERS, FILM_PARAMS, PARAMS, SOLVERS, FitOptions,
-                      FitResult)
+from .engine import START_MARGIN, covariance, from_box, implicit_solution, lm_solve, to_box
+from .options import (
+    _PATCH_ONLY,
+    BATCHING,
+    DEFAULT_BOUNDS,
+    DEFAULT_N_STARTS,
+    DEFAULT_N_STARTS_LAYERS,
+    FILM_PARAMS,
+    PARAMS,
+    SOLVERS,
+    FitOptions,
+    FitResult,
+    MisfitWarning,
+    misfit_warnings,
+    reduced_chi2,
+)
 
 __all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "PARAMS", "FitOptions", "FitResult", "SOLVERS",
            "fit_film", "fit_spectrum", "patch_model", "spectrum_model"]
@@ -199,13 +218,7 @@ def spectrum_model(film, cos_theta, wavelength) -> Array:
 
 
 # ----------------------------------------------------------------------------- parameter map
-def _to_x(y, lo, hi):
-    return lo + (hi - lo) * jax.nn.sigmoid(y)
-
-
-def _to_y(x, lo, hi):
-    u = jnp.clip((x - lo) / (hi - lo), _START_MARGIN, 1.0 - _START_MARGIN)
-    return jnp.log(u) - jnp.log1p(-u)
+_to_x, _to_y = to_box, from_box  # the engine's box transform (module docstring)
 
 
 class _Spec(NamedTuple):
@@ -242,8 +255,29 @@ class _Spec(NamedTuple):
 
 
 # ----------------------------------------------------------------------------- shared solve
-def _solver(name, rtol, atol):
-    return SOLVERS[name](rtol, atol)
+def _least_squares(fn, y0, args, max_steps, cfg, implicit):
+    """`max_steps` steps of the solver `cfg.solver` on ``fn(y, args) → (n,)`` from y0 →
+    `optx.Solution` (its `state` dropped: it holds jaxprs, not returnable from jit).
+
+    Levenberg–Marquardt is the engine's (`engine.lm_solve`: one implementation for every fit
+    of the library; measured against optimistix's in docs/how-to/fit-film.md), run without
+    gradients and, if `implicit`, given the implicit-function-theorem derivatives at the
+    solution (`engine.implicit_solution`, as optimistix's implicit adjoint). The other
+    `SOLVERS` are optimistix's (implicit adjoint)."""
+    if cfg.solver == "levenberg_marquardt":
+        a = jax.lax.stop_gradient(args)
+        big = jnp.full(y0.shape, jnp.inf, y0.dtype)  # y is unconstrained: the box is in it
+        out = lm_solve(lambda y: fn(y, a), jax.lax.stop_gradient(y0), -big, big, max_steps,
+                       rtol=cfg.rtol, atol=cfg.atol)
+        y = implicit_solution(lambda v: fn(v, args), out.x) if implicit else out.x
+        result = optx.RESULTS.where(out.converged, optx.RESULTS.successful,
+                                    optx.RESULTS.nonlinear_max_steps_reached)
+        return optx.Solution(value=y, result=result, aux=None, state=None,
+                             stats={"num_steps": out.steps, "max_steps": max_steps})
+    sol = optx.least_squares(fn, SOLVERS[cfg.solver](cfg.rtol, cfg.atol), y0, args,
+                             throw=False, max_steps=max_steps)
+    return optx.Solution(value=sol.value, result=sol.result, aux=sol.aux, stats=sol.stats,
+                         state=None)
 
 
 def _loss(fn, y, args):
@@ -307,12 +341,6 @@ def _screen(res_screen, y_starts, grid, n_solves, args, batching):
     return y_starts[order[:n_solves]], losses
 
 
-def _strip(sol):
-    # the solver state holds jaxprs (not returnable from jit) and is of no use afterwards
-    return optx.Solution(value=sol.value, result=sol.result, aux=sol.aux, stats=sol.stats,
-                         state=None)
-
-
 def _pipeline(res_start, res_final, y_starts, args, cfg, orders=None, distinct=None):
     """Screen the starts, run short solves from the best few, resolve the fringe order,
     polish the best distinct minima with the final model and keep the best.
@@ -324,10 +352,9 @@ def _pipeline(res_start, res_final, y_starts, args, cfg, orders=None, distinct=N
     best, which are converged already and cost a step). All results are ranked by the
     final model `res_final`; the `1 + cfg.n_alternatives` best *distinct* ones
     (`distinct(y1, y2)`: different minima) are solved to convergence with it (stage 3,
-    under the implicit adjoint); the best is the answer, the others are returned as
+    with implicit derivatives); the best is the answer, the others are returned as
     runner-ups (y (K, p), loss (K,), inf where there is none).
     """
-    solver = _solver(cfg.solver, cfg.rtol, cfg.atol)
     a = jax.lax.stop_gradient(args)
     m = 1 + cfg.n_alternatives
 
@@ -339,8 +366,7 @@ def _pipeline(res_start, res_final, y_starts, args, cfg, orders=None, distinct=N
                                    cfg.batching)
 
         def short(y0):
-            return optx.least_squares(res_start, solver, y0, a, throw=False,
-                                      max_steps=cfg.start_steps).value
+            return _least_squares(res_start, y0, a, cfg.start_steps, cfg, False).value
 
         def round_(seeds, _):
             ys = _batch(short, seeds, cfg.batching)
@@ -364,8 +390,7 @@ def _pipeline(res_start, res_final, y_starts, args, cfg, orders=None, distinct=N
         valid = jnp.ones((1,), bool)
 
     def solve(y0):
-        return _strip(optx.least_squares(res_final, solver, y0, args, throw=False,
-                                         max_steps=cfg.max_steps))
+        return _least_squares(res_final, y0, args, cfg.max_steps, cfg, True)
 
     sols = _batch(solve, y_pol, cfg.batching)
     lp = jnp.where(valid, _nan_inf(jax.vmap(final_loss)(jax.lax.stop_gradient(sols.value))),
@@ -464,7 +489,7 @@ def _orders_fn(spec, base, cos_outer, lam, n_orders):
             mat, _ = spec.with_free(xf, base)
             n0 = _real_index(mat.eta_outer, lam, y.dtype)
             elo, ehi = jnp.asarray(spec.lo[j], y.dtype), jnp.asarray(spec.hi[j], y.dtype)
-            e_m = _START_MARGIN * (ehi - elo)
+            e_m = START_MARGIN * (ehi - elo)
             e2 = jnp.clip(xf[j] * jnp.asarray(ridge_eta, y.dtype), elo + e_m, ehi - e_m)
             c2 = jax.vmap(lambda e: cos2(n0, e))(e2)
             # the same η₂ d (the path at normal incidence), then ± one order at η₂'
@@ -475,7 +500,7 @@ def _orders_fn(spec, base, cos_outer, lam, n_orders):
             xs = jnp.concatenate([xs, xr])
         for k, _ in spec.thick:
             lo, hi = jnp.asarray(spec.lo[k], y.dtype), jnp.asarray(spec.hi[k], y.dtype)
-            margin = _START_MARGIN * (hi - lo)
+            margin = START_MARGIN * (hi - lo)
             xs = xs.at[:, k].set(jnp.clip(xs[:, k], lo + margin, hi - margin))
         return jax.vmap(spec.y_of)(xs)
 
@@ -488,29 +513,6 @@ def _orders_fn(spec, base, cos_outer, lam, n_orders):
         return functools.reduce(jnp.logical_or, apart)
 
     return orders, distinct
-
-
-def _covariance(res_x, x_free, args, n_obs, absolute_sigma):
-    """(stderr (p,), correlation (p, p)) from the Jacobian in physical parameters."""
-    r = res_x(x_free, args)
-    jac = jax.jacfwd(res_x)(x_free, args)  # (n, p)
-    p = x_free.shape[0]
-    jtj = jnp.matmul(jac.T, jac, precision=jax.lax.Precision.HIGHEST)
-    scale = jnp.sqrt(jnp.diag(jtj))
-    ok = scale > 0
-    scale = jnp.where(ok, scale, 1.0)
-    a = jtj / (scale[:, None] * scale[None, :])  # unit diagonal: better conditioned
-    ainv = jnp.linalg.inv(a)
-    if absolute_sigma:
-        s2 = jnp.asarray(1.0, r.dtype)
-    else:
-        s2 = jnp.sum(r * r) / (n_obs - p) if n_obs > p else jnp.asarray(jnp.nan, r.dtype)
-    cov = s2 * ainv / (scale[:, None] * scale[None, :])
-    var = jnp.diag(cov)
-    stderr = jnp.where(ok & (var >= 0), jnp.sqrt(jnp.abs(var)), jnp.inf)
-    d = jnp.sqrt(jnp.abs(jnp.diag(ainv)))
-    corr = ainv / (d[:, None] * d[None, :])
-    return stderr, corr, s2
 
 
 def _cells(lo, hi, n):
@@ -824,7 +826,7 @@ def fit_film(observed, theta_o, *, alpha, initial: Film | Stack,
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
         out = _fit_film_jit(observed.astype(dtype), w, theta_o.astype(dtype), base, y_starts,
                             box, lut, cfg)
-    return _result(out, free, x_starts, True)
+    return _result(out, free, x_starts, True, sigma is not None)
 
 
 def _default_starts(n_starts, kind, spec):
@@ -962,7 +964,7 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
         out = _fit_spectrum_jit(observed.astype(dtype), w, wavelength.astype(dtype),
                                 cos_theta.astype(dtype), base, y_starts, box, cfg)
-    return _result(out, free, x_starts, False)
+    return _result(out, free, x_starts, False, sigma is not None)
 
 
 @functools.partial(jax.jit, static_argnames="cfg")
@@ -993,9 +995,9 @@ def _finish(out, res_x, spec, base, args, w, cfg):
     fitted = spec.with_free(x_free, base)
     r = res_x(x_free, args)
     loss = 0.5 * jnp.sum(r * r)
-    stderr, corr, s2 = _covariance(res_x, jax.lax.stop_gradient(x_free),
-                                   jax.lax.stop_gradient(args), observed.size,
-                                   cfg.absolute_sigma)
+    a = jax.lax.stop_gradient(args)
+    stderr, corr, s2 = covariance(lambda v: res_x(v, a), jax.lax.stop_gradient(x_free),
+                                  absolute_sigma=cfg.absolute_sigma)
     alt_x = jax.vmap(spec.x_free)(alt_y)
     # Δχ² = Σr²/s² of the runner-up minus that of the answer (s² as for the errors)
     gap = jax.lax.stop_gradient(alt_loss - loss)
@@ -1006,9 +1008,16 @@ def _finish(out, res_x, spec, base, args, w, cfg):
             alt_loss, dchi2)
 
 
-def _result(out, free, x_starts, has_alpha):
+def _result(out, free, x_starts, has_alpha, sigma_given):
+    """The `FitResult`, with the misfit test (`options.misfit_warnings`) warned as a
+    `MisfitWarning` when it fails (concrete results only: not under `jax.jit`)."""
     sol, (film, alpha), loss, resid, stderr, corr, start_loss, alt_x, alt_loss, dchi2 = out
+    n, p = int(np.size(resid)), len(free)
+    red = reduced_chi2(2.0 * loss, n, p, sigma_given)
+    msg = misfit_warnings(red, n - p)
+    for m in msg:
+        warnings.warn(m, MisfitWarning, stacklevel=3)
     return FitResult(film, alpha if has_alpha else None, loss,
                      sol.result == optx.RESULTS.successful, sol.stats["num_steps"],
                      dict(zip(free, stderr)), corr, free, resid, x_starts, start_loss, sol,
-                     alt_x, alt_loss, dchi2)
+                     alt_x, alt_loss, dchi2, red, msg)

@@ -1,14 +1,24 @@
-"""What `fit_film` and `fit_spectrum` take and return: `FitOptions` (search, solver and
-patch-model settings, validated once, hashable: a jit static argument), `FitResult` (the
-fitted film, standard errors and Student-t intervals, runner-up minima, the ambiguity flag),
-and the constants they share (parameter names, default boxes, solvers). The search itself
-is `fit`.
+r"""What the fits take and return: `FitOptions` (search, solver and patch-model settings,
+validated once, hashable: a jit static argument), `FitResult` (the fitted film, standard
+errors and Student-t intervals, runner-up minima, the ambiguity flag, the misfit test), and
+the constants they share (parameter names, the one table of default boxes, solvers). The
+search itself is `film_fit`; the thickness maps (`thickness_map`) take their boxes and
+`options` type from here too.
+
+**Misfit test.** With the noise σ of the data given, the weighted residuals of a model that
+explains the data are N(0, 1), and $\chi^2 = \sum_k r_k^2$ at the optimum follows χ² with
+ν = n − p degrees of freedom (n observations, p free parameters; linearised). The reduced
+χ² = χ²/ν above the 99.9 % quantile of χ²_ν/ν (`MISFIT_QUANTILE`; `scipy.stats.chi2.ppf`,
+Press et al. 2007, *Numerical Recipes* §15.1–15.2) is a warning (`misfit_warnings`,
+`MisfitWarning`): one fit in a thousand of a right model raises it falsely; a wrong σ,
+material, view angle or forward model raises it.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -23,8 +33,9 @@ from ..shading.patch import METHODS
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 from . import params as P
 
-__all__ = ["AMBIGUOUS_DCHI2", "DEFAULT_BOUNDS", "FILM_PARAMS", "PARAMS", "SOLVERS",
-           "FitOptions", "FitResult"]
+__all__ = ["AMBIGUOUS_DCHI2", "DEFAULT_BOUNDS", "FILM_PARAMS", "MAP_BOUNDS", "MISFIT_QUANTILE",
+           "PARAMS", "SOLVERS", "FitOptions", "FitResult", "MisfitWarning", "misfit_warnings",
+           "reduced_chi2"]
 
 FILM_PARAMS = Film._fields  # ("thickness", "eta_film", "eta_base", "kappa_base", "eta_outer")
 PARAMS = (*FILM_PARAMS, "alpha")
@@ -41,11 +52,19 @@ DEFAULT_BOUNDS = {
     "eta_outer": (1.0, 4.0),
     "alpha": (1e-3, 1.0),
 }
+#: ... and of the per-pixel thickness maps (`thickness_map`): the same table, except η₂,
+#: whose box is the range of the map's η₂ screen (`eta_grid` points): three band values
+#: per pixel barely separate η₂ from d (the data fix the optical thickness η₂ d), so a map
+#: screens the indices of real films (water 1.33 … oxides and polymers 1.5–1.7) rather
+#: than all of (1, 4), where 7 screened values would be 0.5 apart.
+MAP_BOUNDS = {"thickness": DEFAULT_BOUNDS["thickness"], "eta_film": (1.2, 1.8)}
 
-#: Solver names → constructors taking (rtol, atol). BFGS and nonlinear CG minimise ½Σr²
-#: as a scalar function (no Jacobian structure): the first-order baselines.
+#: Solver names → optimistix constructors taking (rtol, atol), except Levenberg–Marquardt
+#: (None): the library's own (`engine.lm_solve`), which every fit uses (measured faster
+#: than optimistix's: docs/how-to/fit-film.md). BFGS and nonlinear CG minimise ½Σr² as a
+#: scalar function (no Jacobian structure): the first-order baselines.
 SOLVERS = {
-    "levenberg_marquardt": lambda rtol, atol: optx.LevenbergMarquardt(rtol, atol),
+    "levenberg_marquardt": None,
     "gauss_newton": lambda rtol, atol: optx.GaussNewton(rtol, atol),
     "dogleg": lambda rtol, atol: optx.Dogleg(rtol, atol),
     "bfgs": lambda rtol, atol: optx.BFGS(rtol, atol),
@@ -56,7 +75,39 @@ DEGENERATE_CORRELATION = 0.95
 #: Runner-up minima closer than this in Δχ² make a fit `FitResult.ambiguous`.
 AMBIGUOUS_DCHI2 = 9.0
 BATCHING = ("auto", "vmap", "map")
-_START_MARGIN = 5e-3  # starting points at least this fraction of the box inside it
+#: Reduced χ² above this quantile of χ²_ν/ν is a misfit warning (module docstring).
+MISFIT_QUANTILE = 0.999
+
+
+class MisfitWarning(UserWarning):
+    """The model does not explain the data within the given noise (module docstring)."""
+
+
+def reduced_chi2(chi2, n: int, p: int, sigma_given: bool):
+    """χ²/(n − p), NaN when σ was not given (then χ² is not in units of the noise) or
+    n ≤ p. `chi2` = Σr² of the σ-weighted residuals (array or traced)."""
+    if not sigma_given or n <= p:
+        return chi2 * math.nan
+    return chi2 / (n - p)
+
+
+def misfit_warnings(red_chi2, dof: int, what: str = "the model") -> tuple[str, ...]:
+    """(message,) when the reduced χ² `red_chi2` (concrete; ν = `dof`) exceeds the
+    `MISFIT_QUANTILE` point of χ²_ν/ν, else (); () for NaN or traced values."""
+    from scipy.stats import chi2
+
+    try:
+        v = float(np.asarray(red_chi2))
+    except (TypeError, ValueError, RuntimeError):  # a tracer: no verdict inside jit
+        return ()
+    if not (np.isfinite(v) and dof >= 1):
+        return ()
+    limit = float(chi2.ppf(MISFIT_QUANTILE, dof)) / dof
+    if v <= limit:
+        return ()
+    return (f"reduced χ² = {v:.4g} > {limit:.4g} (the {100 * MISFIT_QUANTILE:g} % point of "
+            f"χ²_ν/ν, ν = {dof}): {what} does not explain the data within the noise σ; "
+            f"check σ, the material (indices), the view angles and the model",)
 
 
 #: Default number of screened thicknesses per problem (`FitOptions.n_starts` = None):
@@ -252,6 +303,12 @@ class FitResult(NamedTuple):
             standard errors: how much worse the data say each runner-up is. Under Gaussian
             noise, Δχ² < `AMBIGUOUS_DCHI2` (9) means a likelihood ratio below e^4.5 ≈ 90:
             see `ambiguous`.
+        reduced_chi2: Σr²/(n − p) of the σ-weighted residuals (n observations, p free
+            parameters); NaN when the fit was given no `sigma` or n ≤ p. ≈ 1 when the
+            model explains the data within the noise.
+        warnings: messages about the fit: the misfit test (module docstring), when the
+            reduced χ² exceeds the 99.9 % point of χ²_ν/ν (the fits also `warnings.warn`
+            it as a `MisfitWarning`); empty under `jax.jit` (no concrete values).
     """
 
     film: Film | Stack
@@ -269,6 +326,8 @@ class FitResult(NamedTuple):
     runner_up_params: Array
     runner_up_loss: Array
     runner_up_dchi2: Array
+    reduced_chi2: Array = math.nan
+    warnings: tuple = ()
 
     @property
     def ambiguous(self) -> bool:
@@ -354,6 +413,8 @@ class FitResult(NamedTuple):
                             "loss": f(ru["loss"]), "dchi2": f(ru["dchi2"])}
                            for ru in self.runner_ups],
             "ambiguous": self.ambiguous,
+            "reduced_chi2": f(self.reduced_chi2),
+            "warnings": list(self.warnings),
         }
 
 

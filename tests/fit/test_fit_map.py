@@ -6,11 +6,14 @@ Every fit uses the same tiny image (8×8), grid and model, so the compiled funct
 shared between tests (small CI cost). Tolerances are named where they are asserted.
 """
 
+import warnings
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from thinfilm_jax import Film
+from thinfilm_jax.fit.options import DEFAULT_BOUNDS, MAP_BOUNDS, FitOptions, MisfitWarning
 from thinfilm_jax.fit.thickness_map import (MAP_OPTIONS, _grid_losses, _pixel_model, fit_patch_map,
                                   render_patch_map)
 
@@ -98,6 +101,34 @@ def test_devices_one_identical(wedge):
     b = fit_patch_map(img, theta, sigma=1e-3, devices=1, **KW)
     np.testing.assert_allclose(np.asarray(b.thickness), np.asarray(a.thickness), rtol=0,
                                atol=1e-9)
+    # the box from the fits' one options type is the same box
+    kw = {k: v for k, v in KW.items() if k != "bounds"}
+    c = fit_patch_map(img, theta, sigma=1e-3, options=FitOptions(bounds=KW["bounds"]), **kw)
+    np.testing.assert_array_equal(np.asarray(c.thickness), np.asarray(a.thickness))
+
+
+def test_map_misfit_warning(wedge):
+    """`MapResult.reduced_chi2` = Σ((L(fit) − o)/σ)² / (P (J − 1)), recomputed here from
+    `render_patch_map` of the fitted map: ≈ 1 for the soap film with noise σ (ν = 128:
+    the 99.9 % point of χ²_ν/ν is 1.43, the sd 0.125), no warning; the same image fitted
+    with a glass base (η₃ = 1.5 instead of air) cannot be explained within σ: a
+    `MisfitWarning`. One table of boxes: the map's thickness box is `fit_film`'s."""
+    d, theta, img = wedge
+    sigma = 2e-3
+    noisy = img + np.random.default_rng(4).normal(0.0, sigma, img.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MisfitWarning)
+        res = fit_patch_map(noisy, theta, sigma=sigma, **KW)
+    fitted = np.asarray(render_patch_map(Film(res.thickness, 1.33, 1.0), jnp.asarray(theta),
+                                         ALPHA))
+    chi2 = np.sum(((fitted - noisy) / sigma) ** 2)
+    np.testing.assert_allclose(res.reduced_chi2, chi2 / (H * W * 2), rtol=1e-9)
+    assert 0.6 < res.reduced_chi2 < 1.43 and res.warnings == ()
+    with pytest.warns(MisfitWarning, match="does not explain the data within the noise"):
+        bad = fit_patch_map(noisy, theta, sigma=sigma, **{**KW, "initial": Film(400.0, 1.33,
+                                                                                 1.5)})
+    assert bad.reduced_chi2 > 10.0 and "pixels beyond" in bad.warnings[0]
+    assert MAP_BOUNDS["thickness"] == DEFAULT_BOUNDS["thickness"]
 
 
 @pytest.mark.parametrize("change, match", [
@@ -112,6 +143,10 @@ def test_devices_one_identical(wedge):
     (dict(sigma=-1.0), "sigma"),
     (dict(smoothness_nm=0.0), "smoothness_nm"),
     (dict(bounds={"thickness": (500.0, 100.0)}), "bounds"),
+    (dict(options=MAP_OPTIONS), "model_options"),
+    (dict(options=FitOptions(max_steps=5)), "do not apply"),
+    (dict(options=FitOptions(bounds={"alpha": (0.1, 0.5)})), "bounds"),
+    (dict(model_options="filtered"), "model_options"),
     (dict(theta_o=np.full((H, W), 2.0)), "theta_o"),
 ])
 def test_bad_input_named(change, match):

@@ -12,12 +12,17 @@ can be `jax.vmap`ped, chunked and sharded across devices, `thinfilm_jax.core.sha
    grid, each pixel in turn (checkerboard order) taking
    $\arg\min_g E_p(d_g) + \tfrac12\sum_{q \in N_4(p)} ((d_g - d_q)/τ)^2$: neighbours
    vote for the fringe order (a warm start from the neighbours);
-3. *refine*: damped Gauss–Newton (Levenberg–Marquardt, fixed `steps`) per pixel from the
-   grid value, with the prior's residuals (d − d_q)/τ to the neighbours' current values
-   (Jacobi sweeps), the thickness clipped to its box.
+3. *refine*: Levenberg–Marquardt per pixel from the grid value (`engine.levenberg_marquardt`,
+   the one solver of the fits; a fixed number of `steps`, so the pixels run as one
+   `jax.vmap` with no data-dependent control flow), with the prior's residuals
+   (d − d_q)/τ to the neighbours' current values (Jacobi sweeps), clipped to the box.
 
-Standard errors are the linearised ones of the pixel's own data,
-σ √((JᵀJ)⁻¹)_dd, with σ the given noise level (`sigma`, absolute).
+The boxes are the fits' table (`options.MAP_BOUNDS`: thickness as `fit_film`, η₂ the map's
+screen); `options=` is the fits' one options type, `FitOptions` (its `bounds`), and the map
+model's settings are `model_options=` (`ModelOptions`). Standard errors are the linearised
+ones of the pixel's own data, σ √((JᵀJ)⁻¹)_dd (`engine.covariance`), with σ the given noise
+level (`sigma`, absolute); the map's reduced χ² and misfit warning are those of `FitResult`
+(`options` module docstring) over all fitted pixels.
 
 Two front ends share these stages (`_fit_map`), differing only in the per-pixel model
 ``model(x, pixel inputs, shared inputs) → (J,)``: `fit_patch_map` (uniform light, SPEC §7:
@@ -40,8 +45,10 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -60,6 +67,15 @@ from ..realtime.options import ModelOptions
 from ..shading.patch import METHODS, patch_one, stack_patch_one
 from ..spectral.reflectance import band_centroids, band_film
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
+from .engine import covariance, levenberg_marquardt
+from .options import (
+    MAP_BOUNDS,
+    MISFIT_QUANTILE,
+    FitOptions,
+    MisfitWarning,
+    misfit_warnings,
+    reduced_chi2,
+)
 
 __all__ = ["MapResult", "fit_envmap_map", "fit_patch_map", "render_patch_map"]
 
@@ -68,7 +84,20 @@ MAP_OPTIONS = ModelOptions(quadrature=(8, 8), arithmetic="complex")
 
 
 class MapResult(NamedTuple):
-    """A fitted map (H, W) per field, plus the run's statistics."""
+    """A fitted map (H, W) per field, plus the run's statistics.
+
+    Attributes:
+        thickness, eta_film: the fitted maps (NaN where no pixel was fitted).
+        loss: ½ Σ_j ((L_j − o_j)/σ)² of each pixel's data (the prior's terms not included).
+        stderr: the linearised standard error of each pixel's thickness from its own data
+            (σ absolute; module docstring); inf where the data do not determine it.
+        seconds, pixels_per_second: the run's wall time (compilation included on a first
+            call).
+        reduced_chi2: Σ r² / (P (J − p)) over the P fitted pixels, J bands, p free
+            parameters per pixel: ≈ 1 when the map model explains the image within σ.
+        warnings: the misfit test of `options` (the 99.9 % point of χ²_ν/ν, ν = P (J − p));
+            the map fits also `warnings.warn` it as a `MisfitWarning`.
+    """
 
     thickness: Array
     eta_film: Array
@@ -76,6 +105,8 @@ class MapResult(NamedTuple):
     stderr: Array
     seconds: float
     pixels_per_second: float
+    reduced_chi2: float = float("nan")
+    warnings: tuple = ()
 
 
 @functools.lru_cache(maxsize=32)
@@ -127,37 +158,25 @@ def _grid_losses(obs, pix, ctx, grid, sigma, model):
 
 @functools.partial(jax.jit, static_argnames=("model", "steps", "free_eta"))
 def _refine(obs, pix, x0, nb, nb_ok, ctx, sigma, tau, lo, hi, model, steps, free_eta):
-    """Per pixel: `steps` damped Gauss–Newton steps on [(L(x) − o)/σ, (d − d_q)/τ]."""
+    """Per pixel: `steps` Levenberg–Marquardt steps (`engine.levenberg_marquardt`) on
+    [(L(x) − o)/σ, (d − d_q)/τ] from x0, clipped to [lo, hi]; the data loss ½Σ((L − o)/σ)²
+    and the standard error of d from the pixel's own data (`engine.covariance`, σ absolute)."""
+    p = 2 if free_eta else 1
 
-    def pixel(o, p, x, q, ok):
+    def pixel(o, pp, x, q, ok):
+        def full(xf):
+            return xf if free_eta else jnp.stack([xf[0], x[1]])
+
+        def data(xf):
+            return (model(full(xf), pp, ctx) - o) / sigma
+
         def res(xf):
-            xx = xf if free_eta else jnp.stack([xf[0], x[1]])
-            r = (model(xx, p, ctx) - o) / sigma
-            prior = jnp.where(ok, (xx[0] - q) / tau, 0.0)
-            return jnp.concatenate([r, prior])
+            return jnp.concatenate([data(xf), jnp.where(ok, (xf[0] - q) / tau, 0.0)])
 
-        xf0 = x if free_eta else x[:1]
-
-        def step(_, carry):
-            xf, lam = carry
-            r = res(xf)
-            jac = jax.jacfwd(res)(xf)
-            jtj = jnp.matmul(jac.T, jac, precision=jax.lax.Precision.HIGHEST)
-            g = jnp.matmul(jac.T, r, precision=jax.lax.Precision.HIGHEST)
-            a = jtj + lam * jnp.diag(jnp.diag(jtj) + 1e-12)
-            dx = -jnp.linalg.solve(a, g)
-            xn = jnp.clip(xf + dx, lo[:xf.shape[0]], hi[:xf.shape[0]])
-            better = jnp.sum(res(xn) ** 2) < jnp.sum(r * r)
-            return (jnp.where(better, xn, xf), jnp.where(better, lam * 0.3, lam * 10.0))
-
-        xf, _ = jax.lax.fori_loop(0, steps, step, (xf0, jnp.asarray(1e-3, x.dtype)))
-        xx = xf if free_eta else jnp.stack([xf[0], x[1]])
-        r = res(xf)[: o.shape[0]]
-        jd = jax.jacfwd(lambda v: res(v)[: o.shape[0]])(xf)
-        jtj = jnp.matmul(jd.T, jd, precision=jax.lax.Precision.HIGHEST)
-        cov = jnp.linalg.pinv(jtj)
-        se = jnp.sqrt(jnp.abs(cov[0, 0]))
-        return xx, 0.5 * jnp.sum(r * r), se
+        xf = levenberg_marquardt(res, x[:p], lo[:p], hi[:p], steps)
+        r = data(xf)
+        se = covariance(data, xf, absolute_sigma=True).stderr[0]
+        return full(xf), 0.5 * jnp.sum(r * r), se
 
     return jax.vmap(pixel)(obs, pix, x0, nb, nb_ok)
 
@@ -221,7 +240,9 @@ def _check_image(image, observer, sigma):
     return a
 
 
-def _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps, sweeps, chunk):
+def _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps, sweeps, chunk,
+                   options):
+    """(free, boxes) of a map fit: `MAP_BOUNDS`, then `options.bounds`, then `bounds`."""
     free = (free,) if isinstance(free, str) else tuple(free)
     unknown = [f for f in free if f not in ("thickness", "eta_film")]
     if unknown or "thickness" not in free or len(set(free)) != len(free):
@@ -234,8 +255,8 @@ def _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps, sw
     for name, v, lo in (("grid", grid, 2), ("eta_grid", eta_grid, 1), ("steps", steps, 0),
                         ("sweeps", sweeps, 0), ("chunk", chunk, 1)):
         V.check_int(name, v, lo)
-    b = {"thickness": (0.0, 2000.0), "eta_film": (1.2, 1.8)}
-    for k, v in dict(bounds or {}).items():
+    b = dict(MAP_BOUNDS)
+    for k, v in {**_fit_options(options), **dict(bounds or {})}.items():
         if k not in b:
             raise ValueError(f"bounds: unknown parameter {k!r}; expected thickness, eta_film")
         v = tuple(float(t) for t in v)
@@ -245,6 +266,51 @@ def _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps, sw
             raise ValueError(f"bounds['thickness'] must be >= 0 nm, got {v}")
         b[k] = v
     return free, b
+
+
+def _fit_options(options) -> dict:
+    """The bounds of `options` (a `FitOptions`, the one options type of the fits; None:
+    none); its other fields set the search of `fit_film` and must keep their defaults."""
+    if options is None:
+        return {}
+    if isinstance(options, ModelOptions):
+        raise ValueError("options takes a FitOptions (the fit's settings: bounds); the map "
+                         "model's ModelOptions is model_options=")
+    if not isinstance(options, FitOptions):
+        raise ValueError(f"options must be a thinfilm_jax.FitOptions or None, got "
+                         f"{type(options).__name__}")
+    default = FitOptions()
+    changed = [f.name for f in dataclasses.fields(FitOptions)
+               if f.name != "bounds" and getattr(options, f.name) != getattr(default, f.name)]
+    if changed:
+        raise ValueError(f"options: FitOptions field(s) {changed} do not apply to a thickness "
+                         f"map (only bounds; its search is grid, eta_grid, sweeps and steps, "
+                         f"its model model_options)")
+    return dict(options.bounds or ())
+
+
+def _model_options(model_options) -> ModelOptions:
+    if not isinstance(model_options, ModelOptions):
+        raise ValueError(f"model_options must be a thinfilm_jax.ModelOptions, got "
+                         f"{type(model_options).__name__}")
+    return model_options.checked()
+
+
+def _misfit(loss, n_bands, p):
+    """(reduced χ², warnings) of a map: Σ 2·loss over the fitted pixels / (P (J − p))."""
+    from scipy.stats import chi2
+
+    loss = np.asarray(loss, float)
+    dof = loss.size * (n_bands - p)
+    red = float(reduced_chi2(2.0 * np.sum(loss), loss.size * n_bands, loss.size * p, True))
+    msg = misfit_warnings(red, dof, "the map model")
+    if msg:
+        k = int(np.sum(2.0 * loss > chi2.ppf(MISFIT_QUANTILE, n_bands - p)))
+        msg = (msg[0] + f" ({k} of {loss.size} pixels beyond their own "
+               f"{100 * MISFIT_QUANTILE:g} % point)",)
+        for m in msg:
+            warnings.warn(m, MisfitWarning, stacklevel=4)
+    return red, msg
 
 
 def _fit_map(obs, pix, ctx, model, valid, *, eta0, free, sigma, smoothness_nm, bounds,
@@ -334,16 +400,17 @@ def _fit_map(obs, pix, ctx, model, valid, *, eta0, free, sigma, smoothness_nm, b
     dt = time.perf_counter() - t0
     x = np.where(valid[..., None], x, np.nan)
     loss, se = np.where(valid, loss, np.nan), np.where(valid, se, np.nan)
+    red, msg = _misfit(loss[valid], obs.shape[-1], 2 if free_eta else 1)
     return MapResult(jnp.asarray(x[..., 0]), jnp.asarray(x[..., 1]), jnp.asarray(loss),
-                     jnp.asarray(se), dt, n / dt)
+                     jnp.asarray(se), dt, n / dt, red, msg)
 
 
 def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
                   method: str = "filtered", sigma: float = 0.01, smoothness_nm=None,
                   bounds=None, grid: int = 201, eta_grid: int = 7, steps: int = 8,
                   sweeps: int = 3, chunk: int = 2048, observer: str = DEFAULT_OBSERVER,
-                  options: ModelOptions = MAP_OPTIONS, devices=None,
-                  progress: bool = False) -> MapResult:
+                  model_options: ModelOptions = MAP_OPTIONS, options: FitOptions | None = None,
+                  devices=None, progress: bool = False) -> MapResult:
     """Fit a thickness map (optionally η₂) to an image of band radiances (module docstring).
 
     Args:
@@ -357,30 +424,38 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
         method: a `patch.METHODS` name for the map model ("filtered": real-time, default).
         sigma: noise standard deviation of the image (absolute; weights and errors).
         smoothness_nm: τ of the neighbour prior (None: independent pixels).
-        bounds: {"thickness": (lo, hi), "eta_film": (lo, hi)} (default (0, 2000) nm and
-            (1.2, 1.8) when η₂ is free).
-        grid, eta_grid: grid sizes of stage 1; steps: Gauss–Newton steps per sweep;
+        bounds: {"thickness": (lo, hi), "eta_film": (lo, hi)} overriding the boxes of
+            `options` and the default table `fit.options.MAP_BOUNDS` ((0, 2000) nm, as
+            `fit_film`; η₂ (1.2, 1.8), the map's η₂ screen, when η₂ is free).
+        grid, eta_grid: grid sizes of stage 1; steps: Levenberg–Marquardt steps per sweep
+            (`fit.engine.levenberg_marquardt`, the one solver of the fits);
         sweeps: ICM / Jacobi sweeps of the prior.
         chunk: pixels per batch (memory; progress granularity); every batch has
             min(chunk, H·W) pixels (the last one padded), so one compilation serves a map.
-        observer, options: the map model's observer and `ModelOptions`.
+        observer, model_options: the map model's observer and `ModelOptions` (renamed from
+            ``options``).
+        options: a `FitOptions`, the one options type of the fits, or None: its `bounds`
+            apply (under `bounds`); its other fields set `fit_film`'s search and must keep
+            their defaults (a map's search is `grid`, `eta_grid`, `sweeps` and `steps`).
         devices: None (one device), or as `thinfilm_jax.core.sharding.map_sharded` takes it
             (an int k, devices, or a `Mesh`): each stage's chunks are split across them.
         progress: show a tqdm progress bar over the chunks.
 
     Returns:
-        `MapResult` with (H, W) maps and the run's pixels per second (the wall time
-        includes compilation on a first call).
+        `MapResult` with (H, W) maps, the run's pixels per second (the wall time
+        includes compilation on a first call) and the misfit test (`reduced_chi2`,
+        `warnings`; also warned as a `MisfitWarning`).
 
     Raises:
         ValueError: naming the argument: an image not (H, W, J), NaN/inf or negative
             radiances, a theta_o that is not a scalar or (H, W), α ∉ (0, 1], unknown `free`
-            names.
+            names, `options` not a `FitOptions` (a `ModelOptions` is `model_options`).
     """
     V.check_choice("method", method, METHODS)
     V.check_choice("observer", observer, OBSERVERS)
     free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
-                             sweeps, chunk)
+                             sweeps, chunk, options)
+    options = _model_options(model_options)
     image = _check_image(image, observer, float(sigma))
     h, w, n_bands = image.shape
     theta_in = np.asarray(theta_o, float)
@@ -479,13 +554,13 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
                    free=("thickness",), sigma: float = 0.01, smoothness_nm=None,
                    bounds=None, grid: int = 201, eta_grid: int = 7, steps: int = 8,
                    sweeps: int = 3, chunk: int = 2048, observer: str = DEFAULT_OBSERVER,
-                   options=None, cross_band: bool = True, devices=None,
-                   progress: bool = False) -> MapResult:
+                   model_options: ModelOptions | None = None, options: FitOptions | None = None,
+                   cross_band: bool = True, devices=None, progress: bool = False) -> MapResult:
     """Fit a thickness map (optionally η₂) to an image of a film under an environment map.
 
     The per-pixel model is `envmap_radiance(film, α, n_p, ω_o,p, prefiltered,
     method="filtered")` (SPEC §9, the real-time path) with the pixel's known unit normal
-    n_p and view direction ω_o,p; the stages (grid, prior, Gauss–Newton) are those of
+    n_p and view direction ω_o,p; the stages (grid, prior, Levenberg–Marquardt) are those of
     `fit_patch_map` (module docstring). Pixels whose normal is NaN (background) or faces
     away from the view (⟨n, ω_o⟩ ≤ 0: no signal) are not fitted and come back NaN; they
     do not take part in the prior.
@@ -496,7 +571,9 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
             normal of NaN marks a background pixel.
         prefiltered: `PrefilteredEnvMap` (`prefilter_envmap`, built for `observer`).
         alpha: GGX roughness α ∈ (0, 1] (known).
-        options: `ModelOptions` of the real-time path (default `ibl.REALTIME_OPTIONS`).
+        model_options: `ModelOptions` of the real-time path (default
+            `ibl.REALTIME_OPTIONS`; renamed from ``options``).
+        options: a `FitOptions` or None, as `fit_patch_map` (its `bounds` apply).
         cross_band: as `envmap_radiance`.
         the rest: as `fit_patch_map`.
 
@@ -521,7 +598,9 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
 
     V.check_choice("observer", observer, OBSERVERS)
     free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
-                             sweeps, chunk)
+                             sweeps, chunk, options)
+    model_options = _model_options(REALTIME_OPTIONS if model_options is None
+                                   else model_options)
     if not isinstance(prefiltered, PrefilteredEnvMap):
         raise ValueError(f"prefiltered must be a PrefilteredEnvMap (prefilter_envmap), got "
                          f"{type(prefiltered).__name__}")
@@ -554,8 +633,7 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
     initial = V.check_film(initial, "initial")
     if any(np.ndim(v) for v in initial):
         raise ValueError("initial must be a Film with scalar fields")
-    model = _envmap_model(observer, REALTIME_OPTIONS if options is None else options,
-                          float(alpha), bool(cross_band))
+    model = _envmap_model(observer, model_options, float(alpha), bool(cross_band))
     ctx = tuple(jnp.asarray(float(v)) for v in (initial.eta_base, initial.kappa_base,
                                                 initial.eta_outer)) + (prefiltered,)
     pix = (nrm[valid], vw[valid])

@@ -93,8 +93,8 @@ def _build(observer, d_mu, n_sigma, sigma_max, mu_max):
     process, e.g. each notebook kernel and CLI run)."""
     import colour
 
-    from . import colorimetry, spectra, uplift
     from ..core.compilation_cache import cached_host_tables
+    from . import colorimetry, spectra, uplift
 
     def compute():
         table, carrier, mmax, smax = _tabulate(get_observer(observer), d_mu, n_sigma,
@@ -133,18 +133,24 @@ def build_shat_lut(observer: str | Observer = DEFAULT_OBSERVER, *, d_mu: float =
                    jnp.asarray(mmax, dtype), jnp.asarray(smax, dtype))
 
 
-def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic"):
+def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic", channel=None,
+               carrier=None):
     """(Re, Im) of Ŝ_j(+a, σ²) for a ≥ 0, each of shape broadcast(a, sigma) + (J,), real.
 
     The read of `lookup` written for one fused loop (the real-time kernels): flat table
-    indices (one gather per tap, all sharing one index array), the taps weighted on real
-    parts (no contraction), the carrier e^{−2πi a ν̄_j} by `airy.sincos_turns`.
+    indices (one gather per tap, all sharing one unsigned index array, so no negative-index
+    wrap is emitted per tap), the taps weighted on real parts (no contraction), the carrier
+    e^{−2πi a ν̄_j} by `airy.sincos_turns`.
     ``sigma=None`` means σ = 0 exactly: the σ stencil's weights are then (0, 1, 0, 0)
     (cubic) or (1, 0) (linear), so only the σ = 0 column is read (the same value, 4× fewer
     taps). 0 beyond μ_max; σ clamped at σ_max.
-    """
-    from ..optics.airy import sincos_turns
 
+    `channel` = (k, K): read the bands j·K + k (j = 0 … J/K − 1) of a cross-band table
+    (light channel k of K, `uplift`) in place: each tap's row of J bands is gathered and
+    sliced, which XLA fuses into the loads (`filtered.split_by_light` would copy the table).
+    `carrier`: (cos, sin) of e^{−2πi a ν̄_j} (`carrier_parts`) when the caller has it, e.g.
+    as a power of the order-1 carrier (`filtered._read_orders`).
+    """
     n_mu = lut.table.shape[0] - 3
     n_sig = lut.table.shape[1] - 3
     cols, n_bands = lut.table.shape[1], lut.table.shape[-1]
@@ -154,13 +160,15 @@ def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic"):
     tm = jnp.minimum(a, lut.mu_max) * ((n_mu - 1) / lut.mu_max)
     fm = jnp.clip(jnp.floor(tm), 0, n_mu - 2)
     um = tm - fm
-    flat = fm.astype(jnp.int32) * cols
+    # unsigned: in range by the clip (a NaN's index is clamped by the gather itself)
+    flat = fm.astype(jnp.uint32) * cols
     if sigma is not None:
         ts = jnp.minimum(sigma, lut.sigma_max) * ((n_sig - 1) / lut.sigma_max)
         fs = jnp.clip(jnp.floor(ts), 0, n_sig - 2)
         us = ts - fs
-        flat = flat + fs.astype(jnp.int32)
+        flat = flat + fs.astype(jnp.uint32)
     table = lut.table.reshape(-1, n_bands)  # rows of J bands: ((n_mu + 3)(n_sig + 3), J)
+    bands = slice(None) if channel is None else slice(channel[0], None, channel[1])
 
     def lift(w):  # per-point weights against the band axis
         return w[..., None]
@@ -180,7 +188,7 @@ def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic"):
     for k, i in enumerate(rows):
         rr = ri = None
         for m, j in enumerate(col_off):
-            v = table[flat + (i * cols + j)]
+            v = table[flat + (i * cols + j)][..., bands]
             vr, vi = jnp.real(v), jnp.imag(v)
             if ws is not None:
                 vr, vi = ws[m] * vr, ws[m] * vi
@@ -188,10 +196,20 @@ def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic"):
             ri = vi if ri is None else ri + vi
         er = wm[k] * rr if er is None else er + wm[k] * rr
         ei = wm[k] * ri if ei is None else ei + wm[k] * ri
-    carrier = jnp.reshape(lut.carrier, (1,) * a.ndim + (-1,))  # ranks aligned explicitly
-    c, s = sincos_turns(-lift(a) * carrier)  # e^{−2πi a ν̄_j}
+    c, s = carrier_parts(lut, a, channel) if carrier is None else carrier
     inside = lift(a <= lut.mu_max)
     return (jnp.where(inside, er * c - ei * s, 0.0), jnp.where(inside, er * s + ei * c, 0.0))
+
+
+def carrier_parts(lut: ShatLUT, a, channel=None):
+    """(cos, sin) of the carrier e^{−2πi a ν̄_j} that `read_parts` multiplies back, shape
+    a.shape + (J,); `channel` as there."""
+    from ..optics.airy import sincos_turns
+
+    a = jnp.asarray(a)
+    car = lut.carrier if channel is None else lut.carrier[channel[0]::channel[1]]
+    carrier = jnp.reshape(car, (1,) * a.ndim + (-1,))  # ranks aligned explicitly
+    return sincos_turns(-a[..., None] * carrier)
 
 
 def _catmull_rom(f):

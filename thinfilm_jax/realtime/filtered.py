@@ -30,9 +30,9 @@ import jax.numpy as jnp
 from jax import Array
 
 from ..core.film import Film
-from ..spectral.lut import ShatLUT, read_parts
 from ..optics.opd import OPDMoments
 from ..optics.series import fourier_band_reflectance, fused_terms, series_terms
+from ..spectral.lut import ShatLUT, carrier_parts, read_parts
 from ..spectral.spectra import sensitivity_ft, shat_at_zero
 
 SHAT_SOURCES = ("exact", "lut", "gaussian")
@@ -79,16 +79,18 @@ def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, term
 
 def _lut_bands_under_light(film, cos_mean, opd, observer, terms, lut, arithmetic,
                            interpolation, light):
-    """Σ_k light_k R_jk: the cross-band table split by light channel k (bands j·k, k
-    fastest), one J-band K 29 per channel (`_read_orders`) on the film terms computed once."""
+    """Σ_k light_k R_jk: the cross-band table (bands j·k, k fastest) read one light channel
+    k at a time, in place (`lut.read_parts(channel=(k, K))`: no copy of the table per call),
+    one J-band K 29 per channel (`_read_orders`) on the film terms computed once. A tuple of
+    per-channel tables (`split_by_light`) is read as given."""
     n_light = light.shape[-1]
     s0 = shat_at_zero(observer, jnp.result_type(cos_mean, float), "exact")
     ft = fused_terms(film, cos_mean, arithmetic=arithmetic)
-    luts = lut if isinstance(lut, tuple) and not isinstance(lut, ShatLUT) else \
-        split_by_light(lut, n_light)
+    split = isinstance(lut, tuple) and not isinstance(lut, ShatLUT)
     out = None
     for k in range(n_light):
-        r = _read_orders(ft, s0[k::n_light], terms, opd, luts[k], interpolation)
+        r = _read_orders(ft, s0[k::n_light], terms, opd, lut[k] if split else lut,
+                         interpolation, None if split else (k, n_light))
         r = r * light[..., k:k + 1]
         out = r if out is None else out + r
     return out
@@ -96,14 +98,14 @@ def _lut_bands_under_light(film, cos_mean, opd, observer, terms, lut, arithmetic
 
 def split_by_light(lut: ShatLUT, n_light: int = 3) -> tuple[ShatLUT, ...]:
     """The cross-band table (bands j·k, light channel k fastest) as one J-band table per
-    light channel k, the layout `filtered_bands(light=...)` reads. Each is a strided copy of
-    the table: a kernel that reads it in a loop (the bins of `improved`) splits it once,
-    before the loop, and passes the tuple as `lut` (XLA does not hoist the copies out)."""
+    light channel k. Each is a strided copy of the table; `filtered_bands(light=...)` reads
+    the cross-band table in place instead (`lut.read_parts(channel=...)`), and takes such a
+    tuple as `lut` too."""
     return tuple(ShatLUT(lut.table[..., k::n_light], lut.carrier[k::n_light], lut.mu_max,
                          lut.sigma_max) for k in range(n_light))
 
 
-def _read_orders(ft, s0, terms, opd, lut, interpolation):
+def _read_orders(ft, s0, terms, opd, lut, interpolation, channel=None):
     r"""C₀ Ŝ_j(0) + Σ_m Re(W_m conj Ŝ_j(mμ_D, m²σ_D²)), W_m = Σ_{s,p} (R* − T₁₂₁) z^m.
 
     Reads of 4 taps (bilinear, or σ = 0) are the steps of a `lax.scan` over m (z^m
@@ -111,28 +113,36 @@ def _read_orders(ft, s0, terms, opd, lut, interpolation):
     K bins of `improved`) fuse into one loop that XLA's CPU backend compiles to slow code
     (`ideal_kernel` 1.7× slower, `improved_kernel` 3×: figures/kernel_bench.md). The 16-tap
     bicubic reads are unrolled: one loop of both orders is as fast as two, or faster (under a
-    map's light). The same sum either way. `ft`: `series.fused_terms` at the mean cosine."""
+    map's light); there the carrier of order m is the m-th power of order 1's,
+    e^{−2πi mμ ν̄_j} = (e^{−2πi μ ν̄_j})^m, one `sincos_turns` per band instead of M
+    (equal to rounding). The same sum either way. `ft`: `series.fused_terms` at the mean
+    cosine; `channel`: light channel (k, K) of a cross-band `lut` (`lut.read_parts`)."""
     c0 = 0.5 * (ft.c0[0] + ft.c0[1])
     mean, std = opd
     shape = jnp.broadcast_shapes(c0.shape, mean.shape, *(() if std is None else (std.shape,)))
     out = jnp.broadcast_to(c0[..., None] * jnp.reshape(s0, (1,) * c0.ndim + (-1,)),
                            shape + s0.shape[-1:])
 
-    def order(carry, m):  # carry: the sum so far and z^(m−1) per polarisation
+    def order(carry, m, carrier=None):  # carry: the sum so far and z^(m−1) per polarisation
         out, pr, pi = carry
         pr, pi = (tuple(a * c - b * d for a, b, c, d in zip(pr, pi, ft.z_re, ft.z_im)),
                   tuple(a * d + b * c for a, b, c, d in zip(pr, pi, ft.z_re, ft.z_im)))
         wr = ft.amp[0] * pr[0] + ft.amp[1] * pr[1]
         wi = ft.amp[0] * pi[0] + ft.amp[1] * pi[1]
         sr, si = read_parts(lut, m * mean, None if std is None else m * std,
-                            interpolation=interpolation)
+                            interpolation=interpolation, channel=channel, carrier=carrier)
         return (out + (wr[..., None] * sr + wi[..., None] * si), pr, pi), None
 
     one, zero = jnp.ones(shape, c0.dtype), jnp.zeros(shape, c0.dtype)
     carry = (out, (one, one), (zero, zero))
     if interpolation == "cubic" and std is not None:
+        first = carrier_parts(lut, mean, channel)
+        car = first
         for m in range(1, terms + 1):
-            carry, _ = order(carry, m)
+            if m > 1:  # (c + is)(c₁ + is₁)
+                car = (car[0] * first[0] - car[1] * first[1],
+                       car[0] * first[1] + car[1] * first[0])
+            carry, _ = order(carry, m, car)
         return carry[0]
     ms = jnp.arange(1, terms + 1, dtype=mean.dtype)
     return jax.lax.scan(order, carry, ms)[0][0]

@@ -309,7 +309,14 @@ def _colour_table(film, alpha, normal, view, table, method, observer):
 # ----------------------------------------------------------------------------- real time
 @functools.partial(jax.jit, static_argnums=(5, 6))
 def _realtime_jit(film, alpha, normal, view, pref, cfg, chunk):
-    """Flatten the shading points and shade them `chunk` at a time (bounded memory)."""
+    """Flatten the shading points and shade them `chunk` at a time (bounded memory).
+
+    Each chunk is the branch of a `lax.cond` (`_chunk`), so its result is a buffer of its
+    own: in a bare `lax.map` XLA:CPU fuses the chunk's last kernel (for `filtered` the K 29
+    tail with its LUT gathers, most of the work) into the loop's in-place update of the
+    output, which it runs on one thread (docs/studies/performance.md, "Real-time IBL at
+    frame size"). A chunk whose points all face away from the eye is not shaded (its zeros
+    are what the methods return there)."""
     shape = alpha.shape
     flat = (jax.tree.map(lambda x: x.reshape(-1), film), alpha.reshape(-1),
             normal.reshape(-1, 3), view.reshape(-1, 3))
@@ -323,10 +330,19 @@ def _realtime_jit(film, alpha, normal, view, pref, cfg, chunk):
             x = jnp.pad(x, [(0, m * chunk - n)] + [(0, 0)] * (x.ndim - 1), mode="edge")
             return x.reshape((m, chunk) + x.shape[1:])
 
-        out = jax.lax.map(lambda xs: _realtime_points(*xs, pref, cfg),
-                          jax.tree.map(block, flat))
+        out = jax.lax.map(lambda xs: _chunk(xs, pref, cfg), jax.tree.map(block, flat))
         out = out.reshape(m * chunk, -1)[:n]
     return out.reshape(*shape, out.shape[-1])
+
+
+def _chunk(xs, pref, cfg):
+    """`_realtime_points` of one chunk, or its zeros where no point faces the eye: every
+    method returns 0 at ⟨n, ω_o⟩ ≤ 0, and the test keeps a margin of 1e-6 below 0 (far above
+    the rounding of the kernels' own dot products), so the skip changes no value."""
+    res = jax.eval_shape(lambda: _realtime_points(*xs, pref, cfg))
+    visible = jnp.any(jnp.sum(xs[2] * xs[3], axis=-1) > -1e-6)
+    return jax.lax.cond(visible, lambda: _realtime_points(*xs, pref, cfg),
+                        lambda: jnp.zeros(res.shape, res.dtype))
 
 
 def _realtime_points(film, alpha, normal, view, pref, cfg):

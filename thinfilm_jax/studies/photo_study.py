@@ -385,6 +385,9 @@ def cases(size: int, extras: bool = False) -> tuple:
     rows = (
         Case("a", "oxide", "oxide_nikon", "(a) Nikon known, 16-bit linear TIFF, bare-Si "
              "reference", dict(camera=NIKON, encoding="linear"), (0,), (1.0, 99.5)),
+        Case("a-smooth", "oxide", "oxide_nikon", f"(a) Nikon known, 16-bit linear TIFF, "
+             f"bare-Si reference, smoothness τ = {tau:.3g} nm",
+             dict(camera=NIKON, encoding="linear", smoothness_nm=tau), (0,), (1.0, 99.5)),
         Case("a-noref", "oxide", "oxide_nikon", "(a) Nikon known, 16-bit linear TIFF, no "
              "reference", dict(camera=NIKON, encoding="linear")),
         Case("c-nikon", "oxide", "oxide_nikon", "(c) camera unknown (Nikon photo), 4 pads",

@@ -41,7 +41,16 @@ MISFIT_EXIT = 3
 
 
 def add_arguments(p) -> None:
-    """The photograph options of ``fit-map`` (`cli.fit_map.add_parser` calls this)."""
+    """The photograph options of ``fit-map`` (`cli.fit_map.add_parser` calls this).
+
+    Example (what a photograph's command line parses to):
+        >>> from thinfilm_jax.cli.main import build_parser
+        >>> a = build_parser().parse_args(["fit-map", "wafer.tif", "--camera", "srgb",
+        ...                                "--eta-film", "SiO2", "--eta-base", "Si",
+        ...                                "--reference", "bare.png:0"])
+        >>> a.camera, a.illuminant, a.encoding, a.reference, a.strict
+        ('srgb', 'D65', None, ['bare.png:0'], False)
+    """
     g = p.add_argument_group("photographs (SPEC §13; --camera selects this mode)")
     g.add_argument("--camera", metavar="NAME|CSV|srgb|unknown",
                    help="the camera: a colour-science name (e.g. 'Nikon 5100 (NPL)'), a CSV "

@@ -292,6 +292,12 @@ def _residual(pred, o, sg, cens, black):
                                jax.nn.relu(1.0 - pred))) / sg
 
 
+def _bucket(n, chunk):
+    """Batch size of n pixels: the next power of two up to `chunk` (padded), so that images of
+    many sizes share a few compiled programs."""
+    return min(chunk, 1 << max(int(n) - 1, 0).bit_length())
+
+
 def _chunks(n, size):
     return [slice(i, min(i + size, n)) for i in range(0, n, size)]
 
@@ -304,7 +310,7 @@ def _pad_to(a, size):
 
 def _screen_all(obs, sig, cens, feats, grid, k, chunk, bar):
     out = []
-    size = min(chunk, obs.shape[0])
+    size = _bucket(obs.shape[0], chunk)
     for s in _chunks(obs.shape[0], size):
         n = s.stop - s.start
         r = _screen(*(jnp.asarray(_pad_to(a[s], size)) for a in (obs, sig, cens)), feats,
@@ -785,7 +791,7 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
               jnp.asarray(lo), jnp.asarray(step), jnp.asarray(s_tab), jnp.asarray(ds_tab),
               jnp.asarray(black))
     out = []
-    size = min(chunk, n)
+    size = _bucket(n, chunk)
     for s in _chunks(n, size):
         m = s.stop - s.start
         r = _refine(*(jnp.asarray(_pad_to(a[s], size)) for a in (obs, sig, cens, d0, nb, ok)),

@@ -9,7 +9,7 @@ Two problems, one machinery:
 
 Both minimise $\tfrac12\sum_k r_k^2$ with weighted residuals $r_k = (m_k(x) - o_k)/\sigma_k$
 (σ = 1 unless given) with Levenberg–Marquardt by default: the library's one implementation,
-`engine.lm_solve` (the map fits run it too), stopped by optimistix's Cauchy test
+`engine.lm_solve` (the map fits run it too), stopped by the Cauchy test optimistix uses
 (`FitOptions.rtol`, `atol`); optimistix's other solvers by name (`SOLVERS`). With `sigma`
 given, `FitResult.reduced_chi2` and the misfit warning (`options` module docstring) say
 whether the model explains the data within the noise.
@@ -1014,7 +1014,7 @@ def _result(out, free, x_starts, has_alpha, sigma_given):
     sol, (film, alpha), loss, resid, stderr, corr, start_loss, alt_x, alt_loss, dchi2 = out
     n, p = int(np.size(resid)), len(free)
     red = reduced_chi2(2.0 * loss, n, p, sigma_given)
-    msg = misfit_warnings(red, n - p)
+    msg = misfit_warnings(red, n - p) if sigma_given else ()  # (no wait for the result)
     for m in msg:
         warnings.warn(m, MisfitWarning, stacklevel=3)
     return FitResult(film, alpha if has_alpha else None, loss,

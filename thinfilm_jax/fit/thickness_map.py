@@ -455,7 +455,7 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
     V.check_choice("observer", observer, OBSERVERS)
     free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
                              sweeps, chunk, options)
-    options = _model_options(model_options)
+    model_options = _model_options(model_options)
     image = _check_image(image, observer, float(sigma))
     h, w, n_bands = image.shape
     theta_in = np.asarray(theta_o, float)
@@ -469,13 +469,13 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
         raise ValueError(f"alpha must be a scalar, got shape {np.shape(alpha)}")
     V.check_range("alpha", float(alpha), 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
     if needs_stack(initial):
-        model, ctx, eta0 = _material_pixel_model(initial, free, method, observer, options,
-                                                 float(alpha))
+        model, ctx, eta0 = _material_pixel_model(initial, free, method, observer,
+                                                 model_options, float(alpha))
     else:
         initial = V.check_film(initial, "initial")
         if np.shape(initial.thickness) != () or any(np.ndim(v) for v in initial):
             raise ValueError("initial must be a Film with scalar fields")
-        model = _pixel_model(method, observer, options, float(alpha))
+        model = _pixel_model(method, observer, model_options, float(alpha))
         ctx = tuple(jnp.asarray(float(v)) for v in (initial.eta_base, initial.kappa_base,
                                                     initial.eta_outer))
         eta0 = float(initial.eta_film)

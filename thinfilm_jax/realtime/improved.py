@@ -1,4 +1,4 @@
-r"""The improved real-time filtered model (`method="improved"`, docs/improved.md): K 29 per quantile bin.
+r"""The improved real-time model (`method="improved"`, docs/improved.md): K 29 per quantile bin.
 
 Both `patch_radiance` and `envmap_radiance` call `improved_kernel`; it uses what `filtered`
 may use in real time (a table in (θ_o, α), the Ŝ LUT, the shading point's n, ω_o, α, film).
@@ -46,9 +46,10 @@ the grid of the albedo table, and `lookup_bins` reads them bilinearly. Storing o
 cos θ_o makes α → 0 exact: every bin collapses onto c = cos θ_o with s = 0, i.e. `ideal`.
 
 **Ŝ.** ``shat="lut"`` reads the Ŝ(μ, σ²) table of `lut` (the same table `filtered` reads)
-*bilinearly* in (|μ|, σ) (`lut.lookup(..., interpolation="linear")`), not bicubically: the table stores the slowly
-varying demodulated envelope (≳ 1 µm scale against Δμ = 25 nm), so the bilinear read is
-within 2e-3 of the exact Ŝ and about 10× cheaper on a CPU, which pays for the K bins.
+*bilinearly* in (|μ|, σ) (`lut.lookup(..., interpolation="linear")`), not bicubically: the
+table stores the slowly varying demodulated envelope (≳ 1 µm scale against Δμ = 25 nm), so
+the bilinear read is within 2e-3 of the exact Ŝ and about 10× cheaper on a CPU, which pays
+for the K bins.
 ``"exact"`` and ``"gaussian"`` are as for `filtered_kernel`.
 
 **Under an environment** (`ibl.improved_envmap`, called by `envmap_radiance`) the light L(ω_i)
@@ -57,24 +58,36 @@ source at one c. The same bins split it exactly,
 
 $$ L_j = A\,\mathbb E_{p_R}\big[R(c)\,L(\omega_i)\big]
        = \frac{A}{K}\sum_{k=1}^{K}\mathbb E\big[R(c)\,L(\omega_i)\,\big|\,c\in B_k\big]
-   \approx \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K} R(\bar c_k, s_k)\,
-       P(\omega_{\mu,k}, \alpha_{\mathrm{eff},k}), $$
+   \approx \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K} R(\bar c_k + \Delta c_k, s_k)\,
+       P(d_k, \alpha_k). $$
 
-neglecting only the covariance of R and L inside a bin. P(ω, α) is the prefiltered radiance,
-read per bin at the mean light direction ω_μ,k of the bin's part of the lobe (in the plane
-of n and ω_r by symmetry, tabulated as h_k = sin β_k / sin θ_o, β_k its angle from n) and at
-the level α_eff,k whose normal-view lobe has the same total variance tr Σ_ω (`lookup_lobe`).
-An isotropic read stands for a compact part of the lobe, an arc across it (oblique views);
-near normal view the bins are rings round ω_o ≈ n, which a read centred on their mean (≈ n)
-misplaces. There the mean of the bins' reads is moved to the whole lobe's read (exact at
-θ_o = 0, where the lobe is the prefilter's own kernel) with the tabulated ring weight w:
+*The reads* P(d_k, α_k) (`lookup_reads`, `BinTable.reads`): K prefiltered reads whose
+kernels, weighted 1/K, are the least-absolute-deviation fit of the lobe p_R that keeps its
+first and second moments (`_fit_reads`), the k-th serving the bin of the k-th incidence
+cosine; from θ_o = 70° to 85° they go over to the moment-matched reads of each bin's part of
+the lobe (`lookup_lobe`: its mean direction and equal-variance level), which the horizon-cut
+lobe there favours. Where the light is made of small bright texels, a texel's share of a
+shading point is the lobe's value at it, so the reads must follow the lobe's shape, not
+only its moments: the moment-matched reads leave ∫ |p_R − mixture| dω = 0.4–0.75 at
+θ_o ≤ 60°, the fitted ones 0.01–0.25.
 
-$$ P_k \leftarrow P_k + w\,\big(P(\omega_\mu, \alpha_\mathrm{eff})
-   - \tfrac1K\textstyle\sum_l P_l\big), $$
+*The bins' cosines* c̄_k + Δc_k (`prefilter.bin_radiance_parts`): the light-weighted
+incidence cosine of the bin instead of its uniform-light mean. A read of uniform light has
+the mean direction m₁(α_k) d_k; the read's luminance-weighted mean direction μ_k (the
+prefiltered moments' first three channels, K §3.2) shows where the light inside it lies, and
+Δc_k = c(⟨ω_o, μ_k⟩) − c(m₁⟨ω_o, d_k⟩), c(x) = √((1 + x)/2) (K 22), clipped to the bin's
+±√3 s_k. This puts back the covariance of R and L inside a bin, which the bins alone
+neglect: a bright texel shows the film at its own incidence cosine. Uniform light gives
+Δc = 0, the uniform-light model up to the prefilter's accuracy (measured 7.2e-5,
+asserted 1.2e-4: tests/shading/test_ibl.py). Per point: K reads of the radiance and of the
+first three moment channels, against `filtered`'s one read of 3 + 9 channels.
 
-so the bins keep only their differences (the coupling). The prefiltered moments are not
-needed; a constant environment gives the uniform-light model up to the prefilter's
-accuracy (measured 7.2e-5, asserted 1.2e-4: tests/shading/test_ibl.py).
+Before (`prefilter.bin_radiance`, `studies.small_sources.previous_improved`) each bin read
+its moment-matched part of the lobe at its uniform-light cosine: under maps of many small
+bright sources and no sun (`studies.small_sources`) it lost its advantage over `filtered`
+(0.67–1.35× its mean ΔE₀₀), and the cause is both neglected terms: with each bin's exact
+light, uniform-light cosines give 2.5–3.8 ΔE₀₀ and light-weighted ones 0.7–1.1
+(docs/studies/improved.md, "Many small sources").
 
 Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
 0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,
@@ -107,17 +120,23 @@ from ..core.film import Film
 from .filtered import filtered_bands
 from ..optics.fresnel import safe_div, safe_sqrt
 from ..spectral.lut import ShatLUT
-from ..brdf.microfacet import PatchQuadrature, light_moments, patch_quadrature
+from ..brdf.microfacet import (PatchQuadrature, brdf_no_fresnel, light_moments,
+                               normal_distribution, patch_quadrature, smith_g2)
 from ..optics.opd import OPDMoments, opd_of_cos
 from ..spectral.spectra import DEFAULT_OBSERVER
 
-__all__ = ["BinTable", "bin_table", "lookup_bins", "lookup_lobe", "bin_bands", "scan_bins",
-           "improved_bins", "improved_bands", "improved_kernel"]
+__all__ = ["BinTable", "BinLight", "bin_table", "lookup_bins", "lookup_lobe", "lookup_reads",
+           "prefilter_kernel", "bin_bands", "scan_bins", "improved_bins", "improved_bands",
+           "improved_kernel"]
 
 DEFAULT_BINS = 3
 TABLE_SHAPE = (64, 33)  # (√cos θ_o, √α) nodes, as the albedo table
 TABLE_QUADRATURE = (96, 96)  # half-vector quadrature of the table build
 ALPHA_FLOOR = 1e-4  # quadrature floor of α (the √α = 0 column is the exact mirror limit)
+#: the reads' fit (`_fit_reads`): (ρ, φ) grid, LM steps, moments matched and their weight;
+#: θ_o (degrees) over which the reads go over to the moment-matched ones (`_fit_reads_host`)
+READ_FIT = dict(grid=(32, 24), iterations=30, moments=2, weight=100.0, grazing=(70.0, 85.0))
+KERNEL_NODES = 257  # √α nodes of the prefilter kernel's mean cosine (`BinTable.kernel_mean`)
 
 
 class BinTable(NamedTuple):
@@ -134,11 +153,21 @@ class BinTable(NamedTuple):
     ring: (n_u, n_a): w = 1 − (angle from ω_o to the whole lobe's mean direction) / (mean
         angle ψ_k = arccos(2c̄_k² − 1) of the bins from ω_o), clipped to [0, 1]: 1 where the
         bins are rings round ω_o (normal view), 0 where they are arcs across the lobe.
+        (`lobe` and `ring` place the moment-matched reads of `prefilter.bin_radiance`.)
+    reads: (n_u, n_a, 2, K): the K prefiltered reads of `envmap_radiance(method=
+        "improved")`: [0] h = sin β / sin θ_o of each read's direction (as `lobe`), [1] its
+        level √α; the K prefilter kernels, weighted 1/K each, are the least-absolute-
+        deviation fit of the lobe p_R (`_fit_reads`; the √α = 0 column reads ω_r at level 0).
+    kernel_mean: (KERNEL_NODES,) the mean cosine m₁ = E⟨ω_r, ω_i⟩ of the prefilter's kernel
+        (`prefilter_kernel`) on a uniform grid of √α ∈ [0, 1]: the mean light direction of a
+        read of uniform light is m₁ times its direction.
     """
 
     stats: Array
     lobe: Array
     ring: Array
+    reads: Array
+    kernel_mean: Array
 
     @property
     def bins(self) -> int:
@@ -178,6 +207,159 @@ def _bin_stats(theta_o, alpha, bins, quadrature, ndf):
     # the K bins' parts, then the whole lobe (the mean of the K parts)
     lobe = jax.vmap(sub_lobe, out_axes=-1)(jnp.concatenate([part, p[None]]))  # (2, K + 1)
     return stats, lobe
+
+
+# ----------------------------------------------------------------------------- reads
+def prefilter_kernel(t, alpha):
+    r"""The prefilter's kernel k_α(t) = D(√((1 + t)/2)) G₂(t, 1) / 4 of t = ⟨ω_r, ω_i⟩, 0 for
+    t ≤ 0 (GGX, split sum n = ω_o = ω_r: K 9; the weights of `prefilter.filter_level`).
+    Unnormalised: ∫ k_α dω = `_kernel_norm(α)`."""
+    ok = t > 0
+    cs = jnp.where(ok, jnp.minimum(t, 1.0), 0.0)
+    k = normal_distribution(jnp.sqrt((1 + cs) / 2), alpha) * smith_g2(cs, jnp.ones_like(cs),
+                                                                     alpha) / 4
+    return jnp.where(ok, k, 0.0)
+
+
+def _kernel_integrals(alpha, nodes: int = 64):
+    r"""(∫ k_α dω, ∫ t k_α dω) by the GGX inverse-CDF variable β (tan θ_h = α tan β): with
+    n = ω_o, dω_i = 4 cos θ_h dω_h and D cos θ_h dω_h = d(sin²β) dφ/2π, so
+    ∫ k_α f dω = ∫₀^{β_max} G₂(t, 1) f(t) d(sin²β), t = cos 2θ_h, β_max = atan(1/α)
+    (t = 0): a smooth integrand, Gauss–Legendre in β."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    bmax = jnp.arctan(1.0 / alpha)
+    b = bmax * (x + 1) / 2
+    tan_h2 = (alpha * jnp.tan(b)) ** 2
+    t = (1 - tan_h2) / (1 + tan_h2)
+    dw = bmax * w / 2 * jnp.sin(2 * b)  # d(sin²β)
+    g = smith_g2(jnp.clip(t, 0.0, 1.0), jnp.ones_like(t), alpha) * dw
+    return jnp.sum(g), jnp.sum(g * t)
+
+
+def _kernel_mean_host(n: int) -> np.ndarray:
+    """m₁(√α) = ∫ t k_α / ∫ k_α on √α = linspace(0, 1, n) (1 at √α = 0: a mirror read)."""
+    sqa = np.linspace(0.0, 1.0, n)
+    z, zt = jax.jit(jax.vmap(_kernel_integrals))(jnp.asarray(np.maximum(sqa**2, ALPHA_FLOOR)))
+    m1 = np.asarray(zt, np.float64) / np.asarray(z, np.float64)
+    m1[0] = 1.0
+    return m1
+
+
+def _fit_reads(theta_o, alpha, x0, grid, iterations, moments, weight, ndf):
+    r"""K reads (h_k, √α_k) whose mixture (1/K) Σ_k k̂_k, k̂_k(ω) = k_{α_k}(⟨d_k, ω⟩) / ∫ k_{α_k},
+    d_k = (−sin β_k, 0, cos β_k), sin β_k = h_k sin θ_o (frame n = z, ω_r towards −x; the
+    parametrisation of `BinTable.lobe`, so that every read tends to n at normal view), is the
+    least-absolute-deviation fit of the lobe's density p_R ∝ ρ̃⟨n, ω_i⟩ (K 12) that keeps the
+    lobe's low moments: min ∫ |p_R − mixture| dω with ∫ (p_R − mixture) φ dω ≈ 0 for
+    φ ∈ {x, z} (`moments` ≥ 1: the mean direction, hence also tr Σ = 1 − |μ|²) and
+    {x², z², xz} (`moments` = 2: the covariance in the plane of n and ω_r).
+
+    Why L1: a map of sparse bright texels puts one texel's light on a shading point with a
+    probability ∝ p_R(ω), and the relative error of that point is |p_R − mixture| / p_R at
+    it, so the expected relative error is the L1 distance. Why the moments: under smooth
+    light a read errs by ∇L · ∫ (p_R − mixture) ω dω + ½ ∇²L : ∫ (p_R − mixture) ω ωᵀ dω
+    (what the moment-matched reads of `lobe` make small). The integrals run over a polar
+    grid round ω_r (ρ = ρ_max t², Gauss–Legendre in t, y ≥ 0 by symmetry), ρ_max = 6 atan 4α
+    (the lobe's core). Levenberg–Marquardt on iteratively reweighted least squares (weights
+    1/√(|r| + ε)), the moments as penalty rows of `weight`, from `x0` (the moment-matched
+    reads); `iterations` steps (converged at 30: 60 change no render by 0.01 ΔE). The K
+    kernels are returned sorted by the incidence cosine √((1 + m₁⟨ω_o, d_k⟩)/2) (K 22) of
+    their mean direction: the order of the bins they serve."""
+    n_r, n_p = grid
+    dt = x0.dtype
+    zero = jnp.zeros((), dt)
+    wo = jnp.stack([jnp.sin(theta_o), zero, jnp.cos(theta_o)])
+    wr = jnp.stack([-jnp.sin(theta_o), zero, jnp.cos(theta_o)])
+    e1 = jnp.stack([jnp.cos(theta_o), zero, jnp.sin(theta_o)])
+    xg, wg = np.polynomial.legendre.leggauss(n_r)
+    tg, wg = jnp.asarray((xg + 1) / 2, dt), jnp.asarray(wg / 2, dt)
+    rmax = jnp.minimum(jnp.pi, 6 * jnp.arctan(4 * alpha) + 0.02)
+    rho, drho = rmax * tg**2, rmax * 2 * tg * wg
+    phi = jnp.asarray((np.arange(n_p) + 0.5) * np.pi / n_p, dt)
+    r_, p_ = rho[:, None], phi[None, :]
+    d = (jnp.cos(r_)[..., None] * wr + (jnp.sin(r_) * jnp.cos(p_))[..., None] * e1
+         + (jnp.sin(r_) * jnp.sin(p_))[..., None] * jnp.asarray([0.0, 1.0, 0.0], dt))
+    d = d.reshape(-1, 3)
+    dw = jnp.broadcast_to(jnp.sin(r_) * drho[:, None] * (2 * np.pi / n_p), (n_r, n_p))
+    sq = jnp.sqrt(dw.reshape(-1))
+    f = brdf_no_fresnel(d, wo, alpha, ndf) * jnp.maximum(d[:, 2], 0.0)
+    target = safe_div(f, jnp.sum(f * sq * sq)) * sq
+    k = x0.shape[0] // 2
+    sin_o = jnp.sin(theta_o)
+
+    def direction(h):
+        sb = jnp.clip(h * sin_o, -1.0, 1.0)
+        return jnp.stack([-sb, zero, safe_sqrt(1 - sb * sb)])
+
+    def resid(x):
+        m = 0.0
+        for b in range(k):
+            a = jnp.maximum(x[2 * b + 1] ** 2, ALPHA_FLOOR)
+            m = m + prefilter_kernel(d @ direction(x[2 * b]), a) / _kernel_integrals(a)[0]
+        return target - m * sq / k
+
+    eps = jnp.maximum(1e-3 * jnp.max(jnp.abs(target)), 1e-12)
+    fl = [d[:, 0], d[:, 2]] + ([d[:, 0] ** 2, d[:, 2] ** 2, d[:, 0] * d[:, 2]]
+                               if moments > 1 else [])
+    feats = jnp.stack(fl, -1) * sq[:, None]
+
+    def rows(x, u):  # the L1 rows (reweighted) and the moments' penalty rows
+        r = resid(x)
+        return jnp.concatenate([r * u, weight * (r @ feats)]) if moments else r * u
+
+    def step(carry, _):
+        x, lam = carry
+        r = resid(x)
+        u = jax.lax.stop_gradient(jax.lax.rsqrt(jnp.sqrt(r * r + eps * eps)))
+        jac = jax.jacfwd(rows)(x, u)
+        ru = rows(x, u)
+        h = jac.T @ jac
+        dx = -jnp.linalg.solve(h + lam * jnp.diag(jnp.diag(h) + 1e-12), jac.T @ ru)
+        xn = x + dx
+        xn = xn.at[1::2].set(jnp.clip(xn[1::2], 0.01, 1.0))
+        better = jnp.sum(rows(xn, u) ** 2) < jnp.sum(ru * ru)
+        return (jnp.where(better, xn, x), jnp.where(better, lam / 3, lam * 4)), None
+
+    (x, _), _ = jax.lax.scan(step, (x0, jnp.asarray(1e-2, dt)), None, length=iterations)
+    x = x.reshape(k, 2)
+    z, zt = jax.vmap(_kernel_integrals)(jnp.maximum(x[:, 1] ** 2, ALPHA_FLOOR))
+    key = (zt / z) * jax.vmap(direction)(x[:, 0])[:, :] @ wo
+    return x[jnp.argsort(key)].reshape(-1)
+
+
+def _fit_reads_host(theta, sqa, lobe, bins, ndf, dt):
+    """`_fit_reads` at every node (θ_o, √α) of the table from the moment-matched `lobe`
+    (h, √α_eff); returns reads (n_u, n_a, 2, K) with the limits of `lobe` at θ_o = 0, 90°
+    and √α = 0. One compiled call, a row of nodes per step.
+
+    From θ_o = 70° to 85° (`READ_FIT["grazing"]`, a smoothstep) the reads go over to the
+    moment-matched ones: there the horizon cuts the lobe and no isotropic mixture fits it
+    (the fit's L1 distance rises from ≤ 0.25 below 60° to 0.4–1.4 above 80°), and reads that
+    keep each bin's own mean and spread err less under smooth light (measured by θ_o band
+    on the shipped maps' renders, docs/improved.md)."""
+    n_u, n_a = lobe.shape[:2]
+    x0 = np.stack([lobe[:, :, 0, :bins], np.maximum(lobe[:, :, 1, :bins], 0.02)], -1)
+    x0 = x0.reshape(n_u, n_a, 2 * bins)
+    t, a = np.meshgrid(theta, np.maximum(sqa**2, ALPHA_FLOOR), indexing="ij")
+    fit = {k: v for k, v in READ_FIT.items() if k != "grazing"}
+    row = jax.vmap(functools.partial(_fit_reads, ndf=ndf, **fit))
+    fn = jax.jit(lambda t, a, x: jax.lax.map(lambda tax: row(*tax), (t, a, x)))
+    x = np.array(fn(*(jnp.asarray(v, dt) for v in (t, a, x0))), np.float64)
+    # towards grazing the moment-matched reads (`_fit_reads_host` docstring): smoothstep
+    g0, g1 = np.radians(READ_FIT["grazing"])
+    w = np.clip((g1 - theta) / (g1 - g0), 0.0, 1.0)[:, None, None]
+    x = (w * w * (3 - 2 * w)) * x + (1 - w * w * (3 - 2 * w)) * x0
+    x = x.reshape(n_u, n_a, bins, 2)
+    reads = np.moveaxis(x, -1, -2).copy()  # (n_u, n_a, 2, K): h, √α
+    reads[..., 1, :] = np.abs(reads[..., 1, :])
+    # θ_o = 0: h has no effect there (every read is n); extrapolated in θ_o² from the next
+    # three rows (as `lobe`) for the interpolation towards it. 90°: no lobe, as `lobe`
+    xs = theta[-4:-1] ** 2
+    lag = [np.prod([-xs[m] / (xs[i] - xs[m]) for m in range(3) if m != i]) for i in range(3)]
+    reads[-1, :, 0] = sum(w * reads[-4 + i, :, 0] for i, w in enumerate(lag))
+    reads[0] = lobe[0, :, :, :bins]
+    reads[:, 0, 0], reads[:, 0, 1] = 1.0, 0.0  # √α = 0: the mirror read
+    return reads
 
 
 def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
@@ -220,7 +402,8 @@ def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
     stats[:, 0] = 0.0  # √α = 0 is the mirror limit itself: every bin at cos θ_o, no spread
     lobe[:, 0, 0], lobe[:, 0, 1] = 1.0, 0.0  # ... and every part is ω_r at level 0
     ring[:, 0] = 0.0
-    return stats, lobe, ring
+    reads = _fit_reads_host(theta, sqa, lobe, bins, ndf, dt)
+    return stats, lobe, ring, reads, _kernel_mean_host(KERNEL_NODES)
 
 
 @functools.cache
@@ -248,7 +431,8 @@ def bin_table(bins: int = DEFAULT_BINS, *, shape: tuple[int, int] = TABLE_SHAPE,
         ndf: "ggx" or "beckmann".
         dtype: float dtype of the table.
     Cost: n_u · n_a quadratures of n_u·n_φ nodes (≈ 10 s on a 2-core CPU for the default,
-    once per process; once per cache folder when JAX's persistent compilation cache is on). Computed in float64 when enabled, else in float32.
+    once per process; once per cache folder when JAX's persistent compilation cache is on).
+    Computed in float64 when enabled, else in float32.
     """
     from ..core import _validate as V
 
@@ -302,22 +486,45 @@ def lookup_bins(table: BinTable, cos_o, alpha):
     return jnp.clip(cos_o[..., None] + st[..., 0, :], 0.0, 1.0), st[..., 1, :]
 
 
-def lookup_lobe(table: BinTable, normal, view, cos_o, alpha):
-    """Per bin and for the whole lobe, (direction (..., K + 1, 3), √α_eff (..., K + 1)) at
-    which to read the prefiltered radiance (`BinTable.lobe`): the mean light direction of the
-    bin's part of the lobe, d = cos β n + sin β ê in the plane of n and ω_r (ê ⟂ n towards
-    ω_r, sin β = h sin θ_o with the tabulated h, smooth at normal view), and the level of
-    equal total variance. World vectors; cos_o = ⟨n, ω_o⟩ > 0."""
-    st = _bilinear(table.lobe, safe_sqrt(cos_o), safe_sqrt(alpha))  # (..., 2, K + 1)
-    h = st[..., 0, :]
+def _plane_directions(st, normal, view, cos_o):
+    """d = cos β n + sin β ê (..., R, 3) from h = sin β / sin θ_o (..., R): ê ⟂ n in the plane
+    of n and ω_r, towards ω_r; smooth at normal view. Without gradient where d = ±z (the
+    equirect lookup's (φ, θ) have none at the poles: arctan2(0, 0))."""
     tangent = cos_o[..., None] * normal - view  # (sin θ_o) ê = ω_r − cos θ_o n
     sin2_o = jnp.clip(1.0 - cos_o * cos_o, 0.0, 1.0)[..., None]
-    cos_b = safe_sqrt(jnp.clip(1.0 - h * h * sin2_o, 0.0, 1.0))
-    d = cos_b[..., None] * normal[..., None, :] + h[..., None] * tangent[..., None, :]
-    # the equirect lookup's (φ, θ) have no derivative at the poles (arctan2(0, 0)); there the
-    # direction is ±z (normal view of a z normal): pass no gradient through
+    cos_b = safe_sqrt(jnp.clip(1.0 - st * st * sin2_o, 0.0, 1.0))
+    d = cos_b[..., None] * normal[..., None, :] + st[..., None] * tangent[..., None, :]
     pole = (d[..., 0] == 0) & (d[..., 1] == 0)
-    return jnp.where(pole[..., None], jax.lax.stop_gradient(d), d), st[..., 1, :]
+    return jnp.where(pole[..., None], jax.lax.stop_gradient(d), d)
+
+
+def lookup_lobe(table: BinTable, normal, view, cos_o, alpha):
+    """Per bin and for the whole lobe, (direction (..., K + 1, 3), √α_eff (..., K + 1)) at
+    which `prefilter.bin_radiance` reads the prefiltered radiance (`BinTable.lobe`): the
+    mean light direction of the bin's part of the lobe, d = cos β n + sin β ê in the plane
+    of n and ω_r (ê ⟂ n towards ω_r, sin β = h sin θ_o with the tabulated h, smooth at
+    normal view), and the level of equal total variance. World vectors; cos_o = ⟨n, ω_o⟩ > 0."""
+    st = _bilinear(table.lobe, safe_sqrt(cos_o), safe_sqrt(alpha))  # (..., 2, K + 1)
+    return _plane_directions(st[..., 0, :], normal, view, cos_o), st[..., 1, :]
+
+
+def lookup_reads(table: BinTable, normal, view, cos_o, alpha):
+    """The K prefiltered reads of `envmap_radiance(method="improved")` (`BinTable.reads`):
+    (direction (..., K, 3), level √α (..., K)), directions in the plane of n and ω_r as in
+    `lookup_lobe`. World vectors; cos_o = ⟨n, ω_o⟩ > 0."""
+    st = _bilinear(table.reads, safe_sqrt(cos_o), safe_sqrt(alpha))  # (..., 2, K)
+    return _plane_directions(st[..., 0, :], normal, view, cos_o), st[..., 1, :]
+
+
+class BinLight(NamedTuple):
+    """The light of the K bins under an environment (`prefilter.bin_radiance_parts`), bins
+    first: `radiance` (K, ..., 3) read for each bin, and `cos_shift` (K, ...), the shift of
+    each bin's mean c̄_k towards the mean incidence cosine of the light it reads (docs/
+    improved.md). `scan_bins` given a `BinLight` as `extra` evaluates bin k at
+    c̄_k + shift_k (clipped to [0, 1]) and passes its radiance on."""
+
+    radiance: Array
+    cos_shift: Array
 
 
 # ----------------------------------------------------------------------------- kernel
@@ -338,12 +545,18 @@ def scan_bins(film: Film, cos_bins, std_bins, bands, *, extra=None,
     the K terms stacked on axis −2 when `stack`.
 
     `film` broadcasts with the leading axes of `cos_bins`, `std_bins` (..., K); `extra`
-    (K, ..., C), bins first, is sliced per bin (e.g. each bin's light). XLA compiles each
+    (K, ..., C), bins first, is sliced per bin (e.g. each bin's light); a `BinLight` also
+    moves each bin's mean cosine by its `cos_shift` (the light-weighted bins of
+    `envmap_radiance(method="improved")`) and passes its `radiance` on. XLA compiles each
     step into loops of its own: the K bins unrolled fuse into one loop that XLA's CPU backend
     compiles to slow code (`improved_kernel` 3.0× slower, `envmap_radiance(method=
     "improved")` 1.2×: figures/kernel_bench.md), at the same results. A bin axis broadcast
     against the film would be materialised instead."""
     cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
+    if isinstance(extra, BinLight):
+        shift = jnp.moveaxis(extra.cos_shift, 0, -1)
+        cos_bins = jnp.clip(cos_bins + shift, 0.0, 1.0)
+        extra = extra.radiance
     k = max(cos_bins.shape[-1], std_bins.shape[-1])
     shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in jax.tree.leaves(film)),
                                  cos_bins.shape[:-1], std_bins.shape[:-1],

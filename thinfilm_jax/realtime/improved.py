@@ -323,7 +323,7 @@ def _fit_reads(theta_o, alpha, x0, grid, iterations, moments, weight, ndf):
     (x, _), _ = jax.lax.scan(step, (x0, jnp.asarray(1e-2, dt)), None, length=iterations)
     x = x.reshape(k, 2)
     z, zt = jax.vmap(_kernel_integrals)(jnp.maximum(x[:, 1] ** 2, ALPHA_FLOOR))
-    key = (zt / z) * jax.vmap(direction)(x[:, 0])[:, :] @ wo
+    key = (zt / z) * (jax.vmap(direction)(x[:, 0]) @ wo)
     return x[jnp.argsort(key)].reshape(-1)
 
 

@@ -42,9 +42,9 @@ def _delta_e(values, ref):
 
 
 def test_improved_beats_filtered_under_many_small_sources(lamps):
-    """Measured (float64): filtered 4.309 mean ΔE₀₀, improved 2.612 (÷ filtered 0.606);
+    """Measured (float64): filtered 4.309 mean ΔE₀₀, improved 2.604 (÷ filtered 0.604);
     the model before the lobe-fitted reads and light-weighted bins (`previous_improved`)
-    4.850 (1.13 × filtered). Bounds: improved ≤ 1.25 × measured (3.27) and ≤ 0.7 × filtered
+    4.850 (1.13 × filtered). Bounds: improved ≤ 1.25 × measured (3.26) and ≤ 0.7 × filtered
     (the design target on such maps); the previous model fails both, asserted below.
     Mutations (each fails both bounds): the bins at their uniform-light cosines (Δc = 0)
     3.76 / 0.87 ×; the moment-matched reads with the light-weighted cosines 4.40 / 1.02 ×."""
@@ -56,11 +56,11 @@ def test_improved_beats_filtered_under_many_small_sources(lamps):
                     ref)
     de_i = _delta_e(np.asarray(envmap_radiance(FILM, ALPHA, pts, wo, pi, method="improved")),
                     ref)
-    assert de_i.mean() <= 1.25 * 2.612, (de_i.mean(), de_f.mean())
+    assert de_i.mean() <= 1.25 * 2.604, (de_i.mean(), de_f.mean())
     assert de_i.mean() <= 0.7 * de_f.mean(), (de_i.mean(), de_f.mean())
     view = jnp.broadcast_to(jnp.asarray(wo), pts.shape)
     before = np.asarray(previous_improved(FILM, jnp.full(len(pts), ALPHA), jnp.asarray(pts),
                                           view, pi, bin_table(),
                                           observer="stiles_burch_1959_10"))
     de_b = _delta_e(before, ref)
-    assert de_b.mean() > 1.25 * 2.612 and de_b.mean() > 0.7 * de_f.mean(), de_b.mean()
+    assert de_b.mean() > 1.25 * 2.604 and de_b.mean() > 0.7 * de_f.mean(), de_b.mean()

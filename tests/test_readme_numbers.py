@@ -424,6 +424,12 @@ def _ibl_markdown():
     return markdown(artifact("ibl_bench.json"))
 
 
+def _small_sources_markdown():
+    from thinfilm_jax.studies.small_sources import markdown
+
+    return markdown(artifact("small_sources.json"))
+
+
 def _photo_markdown():
     from thinfilm_jax.studies.photo_study import markdown
 
@@ -731,6 +737,8 @@ SPECS = [
              ("bench.json",), lambda: [artifact("bench.json")["m_selection"]["exact"][
                  "smallest_M_dE_max_below_1_theta_le_80deg"]]),
     Verbatim("| grid | airy value µs |", ("peers.json",), _peers_markdown),
+    Verbatim("| set | map | render | filtered | improved (before) |", ("small_sources.json",),
+             _small_sources_markdown),
     Verbatim("| case | median \\|err\\| nm | p95 nm |", ("photo_study.json",), _photo_markdown),
     Verbatim("| case | against | median", ("photo_study.json",), _photo_markdown),
     Verbatim("| d nm | fringes | spectrum |", ("photo_study.json",), _photo_markdown),

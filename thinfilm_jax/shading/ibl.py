@@ -421,17 +421,16 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
                     cross_band: bool = True) -> Array:
     r"""`envmap_radiance(method="improved")` at shading points: L_j (..., J), 0 where ⟨n,ω_o⟩ ≤ 0.
 
-    $$ L_j = \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K}\sum_c R_{jc}(\bar c_k, s_k)\,
-       P_c(\omega_{\mu,k}, \alpha_{\mathrm{eff},k}) $$
+    $$ L_j = \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K}\sum_c
+       R_{jc}(\bar c_k + \Delta c_k, s_k)\, P_c(d_k, \alpha_k) $$
 
-    Each bin's film reflectance (`improved_bins`) multiplies the prefiltered radiance of its
-    own part of the lobe, read at that part's mean light direction ω_μ,k and equal-variance
-    level α_eff,k (`lookup_lobe`): exact for the light–film coupling between bins
-    (E[R L] = (1/K) Σ_k E[R L | bin k]), the covariance of R and L inside a bin neglected.
-    Near normal view (ring weight w of `BinTable.ring`) the reads' mean is moved to the
-    whole lobe's read. A constant environment gives the uniform-light model exactly. The
-    prefiltered moments are not read: K + 1 radiance reads of 3 channels per point, against
-    `filtered`'s one read of 3 + 9.
+    The bins split the lobe exactly (E[R L] = (1/K) Σ_k E[R L | bin k]); bin k's film
+    reflectance (`improved_bins`) multiplies read k of the K prefiltered reads fitted to the
+    lobe's shape (`improved.lookup_reads`), at the bin's mean incidence cosine moved by what
+    the read's luminance-weighted mean direction says, Δc_k (`prefilter.bin_radiance_parts`:
+    the covariance of R and L inside a bin). A constant environment gives Δc = 0 and the
+    uniform-light model. Per point: K reads of 3 radiance and 3 moment channels, against
+    `filtered`'s one read of 3 + 9 (docs/improved.md).
 
     Args:
         film: `Film` broadcasting with the shading points.

@@ -346,11 +346,9 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     levels as the read is); the light moves it to μ_k, and bin k's mean incidence cosine
     moves with it,
 
-    $$ \Delta c_k = \operatorname{clip}ig(c(\langle\omega_o,\mu_k
-angle)
-       - c(m_1\langle\omega_o, d_k
-angle),\ \pm\sqrt3\,s_kig),\qquad
-       c(x) = \sqrt{(1 + x)/2}\quad(	ext{K 22}), $$
+    $$ \Delta c_k = \operatorname{clip}\big(c(\langle\omega_o,\mu_k\rangle)
+       - c(m_1\langle\omega_o, d_k\rangle),\ \pm\sqrt3\,s_k\big),\qquad
+       c(x) = \sqrt{(1 + x)/2}\quad(\text{K 22}), $$
 
     clipped to the bin's width (a uniform bin of spread s_k spans ±√3 s_k). The move of
     ⟨ω_o, μ_k⟩ is shrunk by `MOMENT_RESOLUTION` (soft threshold), what the prefilter resolves:

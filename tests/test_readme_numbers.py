@@ -493,14 +493,13 @@ def _improved_forest():
     return [g["ratio_mean"], g["ratio_p95"]]
 
 
-def _improved_only_forest_misses() -> bool:
-    """The target (improved ÷ filtered ≤ 0.5 in mean and p95) is missed by forest_slope
-    alone among the shipped and held-out maps, and met over all pixels."""
+def _improved_every_map_meets() -> bool:
+    """The target (improved ÷ filtered ≤ 0.5 in mean and p95) is met on every shipped and
+    held-out map and over all pixels."""
     ibl = artifact("improved.json")["ibl"]
     maps = {**ibl["per_map"], **ibl["held_out"]["per_map"]}
-    missed = {m for m, g in maps.items() if max(g["ratio_mean"], g["ratio_p95"]) > 0.5}
-    return missed == {"forest_slope"} and max(ibl["all"]["ratio_mean"],
-                                              ibl["all"]["ratio_p95"]) <= 0.5
+    return all(max(g["ratio_mean"], g["ratio_p95"]) <= 0.5 for g in maps.values()) and max(
+        ibl["all"]["ratio_mean"], ibl["all"]["ratio_p95"]) <= 0.5
 
 
 def _improved_worse():
@@ -692,12 +691,12 @@ SPECS = [
     Table("| ΔE₀₀ vs reference (mean / p95) |", ("improved.json",), 1, _improved_rows),
     Table("| film (uniform light, θₒ 0–85°", ("models.json",), 1, _models_rows),
     Table("| map (pooled pixels) |", ("improved.json",), 1, _improved_map_rows),
-    Sentence(r"per map except forest_slope \(improved ÷ filtered (\S+) / (\S+)\)",
+    Sentence(r"only the bins act \(improved ÷ filtered (\S+) / (\S+);",
              ("improved.json",), _improved_forest),
-    Claim(r"under every held-out map and per map except forest_slope", ("improved.json",),
-          _improved_only_forest_misses,
-          "another map misses (or forest_slope meets) improved ÷ filtered ≤ 0.5: rewrite the "
-          "sentence after the per-map table"),
+    Claim(r"under every held-out map and on every map, including the overcast", ("improved.json",),
+          _improved_every_map_meets,
+          "a map misses improved ÷ filtered ≤ 0.5: rewrite the sentence after the per-map "
+          "table"),
     Sentence(r"\((\S+) of (\S+) patches, all at θₒ ≥ 80°\).*? \((\S+) → (\S+); M = 2 truncation"
              r"(?s:.*?)α = 0.06 \((\S+) → (\S+)\) and the Figure 7 film at d ≈ 870–935 nm, "
              r"θₒ ≥ 80°, "

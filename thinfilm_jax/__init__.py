@@ -55,6 +55,7 @@ from .optics.index import cauchy as cauchy
 from .optics.index import sellmeier as sellmeier
 from .fit.film_fit import FitOptions as FitOptions
 from .fit.film_fit import FitResult as FitResult
+from .fit.options import MisfitWarning as MisfitWarning
 from .fit.film_fit import fit_film as fit_film
 from .fit.film_fit import fit_spectrum as fit_spectrum
 from .fit.photo import PhotoResult as PhotoResult

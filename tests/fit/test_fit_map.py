@@ -181,6 +181,8 @@ def test_cli_fit_map(wedge, tmp_path, capsys):
     assert np.median(np.abs(fitted - d)) < 1.0  # nm, noise-free
     summary = json.loads((out / "fit_map.json").read_text())
     assert summary["shape"] == [H, W] and summary["compile_seconds"] >= 0
+    # the misfit test travels with the map: a noise-free image of the model fits (≈ 3e-28)
+    assert summary["reduced_chi2"] < 1.0 and summary["warnings"] == []
     assert (out / "thickness_map.png").read_bytes()[:4] == b"\x89PNG"
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary left
 

@@ -10,8 +10,8 @@ OpenImageIO (its first three channels, linear). The view angle is one number
 Writes into ``--out`` (default ``fit_map``), each file atomically (Ctrl-C leaves no partial
 file): ``thickness_map.npy`` (H, W) nm, ``thickness_map.png`` (colour map with a colour bar
 in nm) and ``fit_map.json`` (the settings, the thickness range, the residuals' percentiles,
-pixels per second warm and the compilation time separately (the warm-up batch's time
-minus its warm cost); with ``--free thickness
+the reduced χ² and the misfit warnings, pixels per second warm and the compilation time
+separately (the warm-up batch's time minus its warm cost); with ``--free thickness
 eta_film`` also ``eta_film_map.npy``).
 
 With ``--camera`` the image is a photograph instead: `thinfilm_jax.cli.fit_photo` (encodings,
@@ -363,6 +363,8 @@ def run_fit_map_cli(args) -> int:
         "stderr_nm_median": float(np.nanmedian(np.asarray(res.stderr))),
         "residual_rms_over_sigma": {f"p{q}": float(np.percentile(rms, q))
                                     for q in (50, 95)} | {"max": float(rms.max())},
+        "reduced_chi2": float(res.reduced_chi2),  # the misfit test (options.misfit_warnings)
+        "warnings": list(res.warnings),
         "pixels_per_second_warm": float(res.pixels_per_second),
         "seconds_warm": float(res.seconds),
         "compile_seconds": compile_s,  # warm-up batch time minus its warm cost

@@ -424,6 +424,50 @@ def _ibl_markdown():
     return markdown(artifact("ibl_bench.json"))
 
 
+def _frame_size_rows():
+    """The last run of the per-size bench: ratios and ns a point per size (default chunk)."""
+    run = artifact("kernel_bench_sizes.json")["runs"][-1]
+    names = {65536: "65,536", 1048576: "2²⁰", 3686400: "1440p (3,686,400)"}
+    out = {}
+    for r in run["ratios"]:
+        if r["batch_size"] is None and r["points"] in names:
+            ns = {x["kernel"]: x["ns_per_point"] for x in run["rows"]
+                  if x["points"] == r["points"] and x["batch_size"] is None}
+            out[(names[r["points"]],)] = [
+                r["filtered / ideal"], r["improved / filtered"],
+                r["improved+sun / filtered+sun"],
+                [ns["envmap ideal"], ns["envmap filtered"], ns["envmap improved"]]]
+    return out
+
+
+def _kernel_bench_sentence():
+    rows = {(r["kernel"], r["version"]): r["ns_per_point"]
+            for r in artifact("kernel_bench.json")["rows"]}
+    speed = artifact("kernel_bench.json")["speedup_old_over_new"]
+    times = [v["time"] for v in speed.values()]
+    return [min(times), max(times)] + [rows[(k, "new")] for k in (
+        "filtered_kernel", "ideal_kernel", "improved_kernel", "envmap ideal",
+        "envmap filtered", "envmap improved")]
+
+
+def _improved_cost_sentence():
+    ns = {r["kernel"]: r["ns_per_point"] for r in artifact("kernel_bench.json")["rows"]
+          if r["version"] == "new"}
+    f, i = ns["envmap filtered"], ns["envmap improved"]
+    fs, is_ = ns["envmap filtered + 1 sun"], ns["envmap improved + 1 sun"]
+    return [ns["improved_kernel"], ns["filtered_kernel"],
+            ns["improved_kernel"] / ns["filtered_kernel"], f, i, i / f, fs, is_, is_ / f,
+            is_ / fs]
+
+
+def _reference_bench_sentence():
+    r = artifact("reference_bench.json")
+    by = {(x["version"], x["alpha"]): x["points_per_s"] for x in r["rows"]}
+    sp = r["speedup"]["old 1"]
+    return [sp["0.25"], sp["0.6"], by[("new", 0.25)], by[("new", 0.6)], by[("old 1", 0.25)],
+            by[("old 1", 0.6)], sp["0.05"], by[("old 2", 0.25)]]
+
+
 def _small_sources_markdown():
     from thinfilm_jax.studies.small_sources import markdown
 
@@ -736,6 +780,21 @@ SPECS = [
              ("bench.json",), lambda: [artifact("bench.json")["m_selection"]["exact"][
                  "smallest_M_dE_max_below_1_theta_le_80deg"]]),
     Verbatim("| grid | airy value µs |", ("peers.json",), _peers_markdown),
+    Sentence(r"the minimum of 9\): `improved_kernel` (\S+) ns against (\S+) ns for `filtered_kernel`"
+             r"\s+\((\S+)×(?s:.*?)`envmap_radiance` takes (\S+) ns with `filtered`,\s+(\S+) ns with "
+             r"`improved` \((\S+)×(?s:.*?)sun split from the map (\S+) ns \(`filtered`\) and (\S+) ns "
+             r"\(`improved`\): `improved` with its sun\s+costs (\S+)× `filtered` as published "
+             r"\((\S+)× `filtered` with the same split\)", ("kernel_bench.json",),
+             _improved_cost_sentence),
+    Sentence(r"α = 0.25 and 0.6 \((\S+)× and (\S+)×: (\S+) and (\S+) points/s against (\S+) and "
+             r"(\S+)\), met at\s+α = 0.05 \((\S+)×\)(?s:.*?)at α = 0.25: (\S+) points/s here",
+             ("reference_bench.json",), _reference_bench_sentence),
+    Table("| points | filtered / ideal | improved / filtered |", ("kernel_bench_sizes.json",), 1,
+          _frame_size_rows),
+    Sentence(r"met by the other four: (\S+)–(\S+)× \(`filtered_kernel` (\S+) ns a point,\s+"
+             r"`ideal_kernel` (\S+), `improved_kernel` (\S+); `envmap_radiance` ideal (\S+), "
+             r"filtered (\S+),\s+improved (\S+)\)", ("kernel_bench.json",),
+             _kernel_bench_sentence),
     Verbatim("| set | map | render | filtered | improved (before) |", ("small_sources.json",),
              _small_sources_markdown),
     Verbatim("| case | median \\|err\\| nm | p95 nm |", ("photo_study.json",), _photo_markdown),

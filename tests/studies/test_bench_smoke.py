@@ -54,3 +54,20 @@ def test_pareto_front():
     t = np.array([1.0, 2.0, 3.0, 0.5, 4.0])
     e = np.array([5.0, 1.0, 2.0, 9.0, 0.1])
     assert pareto.pareto_front(t, e) == [3, 0, 1, 4]
+
+
+def test_reference_bench_tiny(tmp_path):
+    """`kernel_bench --reference`: this checkout against itself loaded as a baseline (the
+    path an older checkout takes), one α, one round; the two agree on every value's speed
+    table and the report names both."""
+    from pathlib import Path
+
+    from thinfilm_jax.studies import kernel_bench
+
+    here = Path(kernel_bench.__file__).resolve().parents[2]
+    r = kernel_bench.run_reference_bench(tmp_path, baselines=(here,), alphas=(0.25,),
+                                         resolution=4, repeats=1, verbose=False)
+    data = json.loads((tmp_path / "reference_bench.json").read_text())
+    assert {row["version"] for row in data["rows"]} == {"new", "old 1"}
+    assert all(row["points_per_s"] > 0 for row in data["rows"]) and r["points"] > 0
+    assert "× this checkout" in (tmp_path / "reference_bench.md").read_text()

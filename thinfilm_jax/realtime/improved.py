@@ -35,7 +35,7 @@ $$ \bar R_j \approx \frac1K\sum_{k=1}^{K}\Big\{C_0(\bar c_k)\hat S_j(0) + \sum_{
 The skewed mixture of K Gaussians on D follows the true distribution of D(c), and the C₀
 average is a K-point rule placed where the mass is. K = 3 is the default (measured: 1.1–1.2× the
 cost of `filtered` per shading point on a CPU before the kernels were written for XLA fusion,
-1.47× since: figures/kernel_bench.md; K = 2 is cheaper and about 1.6× less accurate,
+1.65× since, under a map 2.4×: figures/kernel_bench.md; K = 2 is cheaper and about 1.6× less accurate,
 K = 4 more accurate and dearer: docs/improved.md); K = 1 is K 29 fed with the exact E[c],
 Var c of the lobe instead of ⟨ω_o, μ_ω⟩.
 
@@ -92,8 +92,8 @@ light, uniform-light cosines give 2.5–3.8 ΔE₀₀ and light-weighted ones 0.
 Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
 0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,
 at 1.17× its cost per shading point (before the fused kernels; figures/kernel_bench.md now
-has 1.47×); sphere renders under the four shipped maps 0.30 / 0.27 × (with the suns
-split and shaded apart, `sources`).
+has 1.65×); sphere renders under the four shipped maps 0.22 / 0.21 × (with the suns
+split and shaded apart, `sources`; 0.30 / 0.27 × before the lobe-fitted reads).
 Measured gains, cost and the regions where it is not better: docs/improved.md.
 
 Example:

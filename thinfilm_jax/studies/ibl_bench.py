@@ -192,7 +192,7 @@ OPTION_VARIANTS = (
     ("filtered, 32×64 prefilter", dict(resolution=(32, 64)), dict(method="filtered")),
     ("filtered, 9 levels", dict(levels=9), dict(method="filtered")),
     ("filtered, 33 levels", dict(levels=33), dict(method="filtered")),
-    ("improved (bins of cos θ₁, P at the lobe's mean direction)", {},
+    ("improved (bins of cos θ₁, reads fitted to the lobe, light-weighted cosines)", {},
      dict(method="improved")),
     ("filtered + suns split (prefilter_envmap(sources=4))", dict(sources=4),
      dict(method="filtered")),

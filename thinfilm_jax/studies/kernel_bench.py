@@ -28,6 +28,11 @@ module name and timed interleaved with the current ones: before/after in one run
 Run: ``python -m thinfilm_jax.studies.kernel_bench [--out figures] [--quick]
 [--baseline /path/to/old/checkout] [--repeats N]``.
 
+Reference mode (``--reference [CHECKOUT ...]``, `run_reference_bench`): the float64 IBL
+reference (`envmap_radiance(method="reference")`) of this checkout and of each older
+checkout given, on the points of an 8 px sphere at α = 0.05, 0.25, 0.6, interleaved;
+writes ``reference_bench.json`` / ``.md``.
+
 Per-size mode (``--sizes N ...``, `run_size_bench`): the envmap paths only (ideal,
 filtered, improved, and filtered / improved with one sun) at each point count and each
 chunk size ``--batch-sizes B ...`` (`envmap_radiance`'s `batch_size`: the points are shaded
@@ -287,6 +292,92 @@ def run_kernel_bench(out="figures", *, points: int = 65536, repeats: int = 7,
     return result
 
 
+def run_reference_bench(out="figures", *, baselines=(), alphas=(0.05, 0.25, 0.6),
+                        resolution: int = 8, repeats: int = 5, verbose: bool = True) -> dict:
+    """The IBL reference (`envmap_radiance(method="reference")`, float64, the public call) of
+    this checkout and of each baseline checkout on the same points: the shading points of an
+    8 px sphere (Figure 4's film, d = 600 nm, η₂ = 1.2 on η₃ = 2.0) under the shipped
+    128 × 256 venice_sunset, every version timed once per round, rounds interleaved, warm
+    minima (compile apart). Writes ``reference_bench.json`` / ``.md`` in `out`."""
+    import thinfilm_jax as current
+
+    from .render import camera, sphere
+
+    if not jax.config.jax_enable_x64:
+        raise RuntimeError("the reference bench needs float64: jax_enable_x64")
+    out = Path(out)
+    env = environment()
+    wo, right, up = camera(0.7, 15.0)
+    mask, n = sphere(resolution, wo, right, up)
+    pts = np.asarray(n[mask])
+    k = len(pts)
+    versions = {"new": current}
+    for i, b in enumerate(baselines):
+        versions[f"old {i + 1}"] = load_package(b, alias=f"thinfilm_jax_baseline{i}")
+    rows, timed = [], []
+    for version, pkg in versions.items():
+        emap = _module(pkg, "shading.envmap", "envmap").load_envmap("venice_sunset")
+        ibl = _module(pkg, "shading.ibl", "ibl")
+        film = pkg.Film(*(jnp.full(k, x) for x in (600.0, 1.2, 2.0, 0.0)))
+        for alpha in alphas:
+            args = (film, jnp.full(k, alpha), jnp.asarray(pts),
+                    jnp.broadcast_to(jnp.asarray(wo), pts.shape), emap)
+
+            def call(*a, ibl=ibl):
+                return ibl.envmap_radiance(*a, method="reference")
+
+            t0 = time.perf_counter()
+            jax.block_until_ready(call(*args))
+            row = {"version": version, "alpha": alpha, "points": k,
+                   "first_call_s": time.perf_counter() - t0, "times_s": []}
+            rows.append(row)
+            timed.append((row, call, args))
+            log(f"  {version} α = {alpha:g}: first call {row['first_call_s']:.1f} s", verbose)
+    loads = []
+    for i in range(repeats):
+        loads.append(_load())
+        for row, fn, args in timed:
+            row["times_s"].append(_timed(fn, args))
+        log(f"  round {i + 1}/{repeats}, load {loads[-1]}", verbose)
+    for row in rows:
+        row["warm_s"] = min(row.pop("times_s"))
+        row["points_per_s"] = k / row["warm_s"]
+        row["compile_s"] = max(row["first_call_s"] - row["warm_s"], 0.0)
+    by = {(r["version"], r["alpha"]): r for r in rows}
+    result = {"environment": env, "repeats": repeats, "points": k,
+              "current_commit": _commit(Path(current.__file__).parent.parent),
+              "baselines": [baseline_record(b) for b in baselines],
+              "load_average_per_round": loads, "rows": rows,
+              "speedup": {v: {str(a): by[(v, a)]["warm_s"] / by[("new", a)]["warm_s"]
+                              for a in alphas} for v in versions if v != "new"}}
+    text = write_report(out, "reference_bench", result, reference_markdown)
+    if verbose:
+        print(text)
+    return result
+
+
+def reference_markdown(result: dict) -> str:
+    env = result["environment"]
+    names = {"new": f"this checkout ({result['current_commit']})"}
+    names.update({f"old {i + 1}": f"{b['commit']} ({b['path']})"
+                  for i, b in enumerate(result["baselines"])})
+    lines = ["## The IBL reference against older checkouts", "",
+             f"`envmap_radiance(method=\"reference\")`, float64, the {result['points']} "
+             "shading points of an 8 px sphere (d = 600 nm, η₂ = 1.2 on η₃ = 2.0) under the "
+             f"shipped 128 × 256 venice_sunset; {env['devices']}, {env['cpu_count']} CPUs, "
+             f"jax {env['jax']}, {env['date']}; every version once per round, "
+             f"{result['repeats']} rounds interleaved, warm minima; 1-min load average per "
+             "round: " + ", ".join(f"{x[0]:.1f}" for x in result["load_average_per_round"])
+             + ".", "", "| version | α | points / s | warm s | compile s | × this checkout |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for r in result["rows"]:
+        sp = result["speedup"].get(r["version"], {}).get(str(r["alpha"]))
+        lines.append(f"| {names[r['version']]} | {r['alpha']:g} | {r['points_per_s']:.0f} | "
+                     f"{r['warm_s']:.3f} | {r['compile_s']:.1f} | "
+                     + ("—" if sp is None else f"{1 / sp:.3f} (new {sp:.1f}× faster)") + " |")
+    return "\n".join(lines) + "\n"
+
+
 def report_markdown(result: dict) -> str:
     """The table: cost analysis first (deterministic), then the warm times."""
     env = result["environment"]
@@ -485,8 +576,15 @@ def main(argv=None) -> int:
                    help="per-size mode: envmap_radiance chunk sizes (0: its default)")
     p.add_argument("--append", action="store_true",
                    help="per-size mode: add this run to the runs in the existing report")
+    p.add_argument("--reference", nargs="*", metavar="CHECKOUT",
+                   help="reference mode: the float64 IBL reference of this checkout and of "
+                        "these older ones (reference_bench.json / .md)")
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
+    if args.reference is not None:
+        run_reference_bench(args.out, baselines=tuple(args.reference),
+                            repeats=3 if args.quick else args.repeats)
+        return 0
     if args.sizes:
         batch = tuple(b or None for b in (args.batch_sizes or [0]))
         run_size_bench(args.out, sizes=args.sizes, batch_sizes=batch,

@@ -18,7 +18,7 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
    piecewise-constant map and third order in (block size / lobe width). Summed by parts,
    the whole map costs one contraction Σ_B g_B · L_B with per-map weights L_B
    (`block_light`), one node per block.
-2. *Texel rule.* The K = 128 blocks with the largest estimated error (`refine_counts`),
+2. *Texel rule.* The K = 256 blocks with the largest estimated error (`refine_counts`),
    score_B = ρ̃⟨n,ω⟩ Σ_(t∈B) Ω_t Σ_k c_k,t · min(1, (Δ_B / ℓ_B)³),
    ℓ_B = 2⟨h,ω_B⟩ √(α² cos⁴θ_h + sin²θ_h cos²θ_h) (the local width of the GGX lobe mapped
    to ω_i: 2α at its peak, compressed by ⟨h,ω_i⟩ at grazing views; Δ_B the block's angular
@@ -49,7 +49,7 @@ counts it is within 1.3e-4 of it (largest band error / band maximum at α = 0.05
 37 sphere points on each shipped map, 6 random points with grazing views on the sunset map;
 `refine_counts`), at
 H W / b² + K b² + K₃ s² node evaluations per point against the exhaustive rule's H W s²:
-5.1k against 131k at α = 0.25 (s = 2) and 20k against 524k at α = 0.05 (s = 4) on the
+7.2k against 131k at α = 0.25 (s = 2) and 22.5k against 524k at α = 0.05 (s = 4) on the
 shipped maps.
 
 The exhaustive rule (every texel with s × s nodes, the reference before this module) stays
@@ -402,13 +402,14 @@ def block_size(h: int, w: int) -> int:
 def refine_counts(blocks: int, b: int, s: int) -> tuple[int, int]:
     """(K, K₃) of the adaptive rule: the blocks integrated again by the texel rule, and the
     texels among theirs (among all blocks where a block is one texel) integrated with s × s
-    sub-nodes, per point: K = 128, K₃ = 64 s² (at most all of them; no sub-texel level where
+    sub-nodes, per point: K = 256, K₃ = 64 s² (at most all of them; no sub-texel level where
     s = 1, since one node per texel is coarser than the texel rule). Measured against the
     exhaustive rule (largest band error / band maximum) on 6 random points of the sunset map,
     two at 85° from the normal: K₃ = 512, 1024, 2048 at α = 0.05 (s = 4) give 3.9e-3,
     1.0e-5, 1.6e-5 (the grazing views' thin lobes need them); K₃ = 128, 256, 512 at
     α = 0.25 (s = 2) give 5.8e-4, 8.1e-5, 1.4e-4 (not monotone: the texel rule's errors
-    partly cancel); K = 256 instead of 128 changes them by less than 2×."""
+    partly cancel; these were measured with K = 128); K = 256 instead of 128 changes them by
+    less than 2×, and is kept for wide lobes under a small map."""
     if s <= 1:
         return (0, 0) if b == 1 else (int(min(blocks, 256)), 0)
     k = int(min(blocks, 256)) if b > 1 else 0

@@ -29,6 +29,19 @@ improved.md) — per render, per map (pooled pixels) and per region of the spher
 `diagnose` (the cause, dev maps): the exact per-bin light of `improved`'s bins from the
 reference's texel quadrature, fed to the bins' film terms with (a) the bins' uniform-light
 incidence cosines, (b) the light-weighted ones; and the real-time reads with (b).
+
+Example (a small lamp map: most of its power is in bright texels, yet no lamp is a sun that
+`sources.extract_sources` splits off, so only `improved`'s bins act on it):
+    >>> from thinfilm_jax.shading.sources import extract_sources
+    >>> from thinfilm_jax.studies.small_sources import lamps_map, power_share
+    >>> env = lamps_map(seed=7, h=64, n=100)
+    >>> env.radiance.shape
+    (64, 128, 3)
+    >>> share, texels = power_share(env)  # texels brighter than 10× the mean luminance
+    >>> round(share, 2), texels
+    (0.68, 403)
+    >>> int(extract_sources(env, max_sources=4)[1].count)
+    0
 """
 
 from __future__ import annotations

@@ -468,6 +468,11 @@ def _reference_bench_sentence():
             by[("old 1", 0.6)], sp["0.05"], by[("old 2", 0.25)]]
 
 
+def _ibl_frame_ratios():
+    rows = {r["name"]: r["warm_s"] for r in artifact("ibl_bench.json")["throughput"]}
+    return [rows["filtered (LUT)"] / rows["ideal"], rows["improved (LUT)"] / rows["filtered (LUT)"]]
+
+
 def _small_sources_markdown():
     from thinfilm_jax.studies.small_sources import markdown
 
@@ -789,6 +794,8 @@ SPECS = [
     Sentence(r"α = 0.25 and 0.6 \((\S+)× and (\S+)×: (\S+) and (\S+) points/s against (\S+) and "
              r"(\S+)\), met at\s+α = 0.05 \((\S+)×\)(?s:.*?)at α = 0.25: (\S+) points/s here",
              ("reference_bench.json",), _reference_bench_sentence),
+    Sentence(r"normals facing the eye, `figures/ibl_bench.md`\)\s+`filtered` costs (\S+)× `ideal` "
+             r"and `improved` (\S+)× `filtered`", ("ibl_bench.json",), _ibl_frame_ratios),
     Table("| points | filtered / ideal | improved / filtered |", ("kernel_bench_sizes.json",), 1,
           _frame_size_rows),
     Sentence(r"met by the other four: (\S+)–(\S+)× \(`filtered_kernel` (\S+) ns a point,\s+"

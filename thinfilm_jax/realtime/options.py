@@ -13,6 +13,7 @@ library's: each name means one thing everywhere.
 | ``quadrature`` | (n_u ≥ 1, n_φ ≥ 2) | orders of the half-vector patch quadrature |
 | ``arithmetic`` | "auto" · "real" · "complex" | Fresnel arithmetic (a scene specialisation) |
 | ``layer`` | "auto" · "film" · "bare" | "bare": no film (d = 0), the outer|base Fresnel only |
+| ``bins`` | int ≥ 1 (3) | K, the equal-probability bins of cos θ₁ of `method="improved"` |
 
 ``arithmetic="auto"`` picks the real (dielectric) path when the concrete film allows it
 (κ₃ = 0, η₂, η₃ ≥ η₁) and the complex one otherwise or under `jit`, where the caller forces
@@ -21,6 +22,11 @@ bare interface when every thickness is concretely 0 (`reflectance.choose_layer`)
 specialisations change no result beyond rounding, except that a bare film gets the exact
 R₁₃ Ŝ_j(0) where the Fourier methods would truncate at M terms. The observer is not a field: it is
 the keyword ``observer=`` of every public function (SPEC §8).
+
+``bins`` trades accuracy for cost in `improved`: measured under maps
+(docs/studies/improved.md, "Choosing K"), K = 2 costs ≈ 1.5× `filtered` a point and K = 3
+(the default) ≈ 2.3×, K = 4 more, with the error falling as K grows. Each K builds its own
+(θ_o, α) table once (≈ 15 s on a 2-core CPU, then cached with the compiled programs).
 
 Example:
     >>> from thinfilm_jax import ModelOptions
@@ -34,6 +40,7 @@ from typing import NamedTuple
 
 from ..core import _validate as V
 from .filtered import SHAT_SOURCES
+from .improved import DEFAULT_BINS
 from ..brdf.microfacet import DEFAULT_QUADRATURE, NDFS
 from ..spectral.reflectance import LAYERS
 
@@ -49,6 +56,7 @@ class ModelOptions(NamedTuple):
     quadrature: tuple[int, int] = DEFAULT_QUADRATURE
     arithmetic: str = "auto"
     layer: str = "auto"
+    bins: int = DEFAULT_BINS
 
     def checked(self) -> ModelOptions:
         """The same options validated (ValueError naming the field) and normalised."""
@@ -57,7 +65,8 @@ class ModelOptions(NamedTuple):
         V.check_choice("arithmetic", self.arithmetic, ARITHMETIC_CHOICES)
         V.check_choice("layer", self.layer, LAYERS)
         return self._replace(terms=V.check_int("terms", self.terms, 0),
-                             quadrature=V.check_quadrature(self.quadrature))
+                             quadrature=V.check_quadrature(self.quadrature),
+                             bins=V.check_int("bins", self.bins, 1))
 
 
 def check_options(options) -> ModelOptions:

@@ -102,8 +102,9 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         observer: colour bands.
         options: `ModelOptions` (default `REALTIME_OPTIONS`: shat="lut", the map's table):
             terms = Fourier orders M and shat = Ŝ source of the real-time methods,
-            arithmetic ("auto" specialises a concrete dielectric film); ndf must be "ggx"
-            (the prefiltered maps are GGX); quadrature does not apply.
+            arithmetic ("auto" specialises a concrete dielectric film), bins = K of
+            `improved` (fewer: cheaper, less accurate); ndf must be "ggx" (the prefiltered
+            maps are GGX); quadrature does not apply.
         cross_band: True: R_jk under RGB light (SPEC §9); False: the diagonal approximation.
         subdivisions: s Gauss nodes per axis inside each refined texel (reference); None = auto.
         n_cos: nodes of the reference's R_jk(cos θ₁) table.
@@ -177,7 +178,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
             raise ValueError("the PrefilteredEnvMap was built for another observer")
         cfg = (method, observer, terms, shat, bool(cross_band), arithmetic)
         if method == "improved":  # its (θ_o, α) tables travel with the map
-            pref = (pref, bin_table(dtype=dtype))
+            pref = (pref, bin_table(options.bins, dtype=dtype))
         return _realtime_jit(film, alpha, *nv, pref, cfg, int(batch_size or 65536))
     return exact_radiance(film, alpha, *nv, env, method=method, observer=observer,
                           cross_band=bool(cross_band), arithmetic=arithmetic,

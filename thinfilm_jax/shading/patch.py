@@ -118,7 +118,8 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
         lut = build_shat_lut(observer, dtype=dtype)
     options = options._replace(arithmetic=choose_arithmetic(film, options.arithmetic),
                                layer=choose_layer(film, options.layer))
-    table = bin_table(ndf=options.ndf, dtype=dtype) if method == "improved" else None
+    table = (bin_table(options.bins, ndf=options.ndf, dtype=dtype) if method == "improved"
+             else None)
     return _patch_jit(film, theta_o, alpha, (lut, table), (method, observer, options, batch_size),
                       shape)
 
@@ -219,7 +220,7 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
                                      shat="exact", arithmetic=o.arithmetic)
     if method == "improved":
         if table is None:  # the default table (host-built, cached; fine under jit too)
-            table = bin_table(ndf=o.ndf, dtype=albedo.dtype)
+            table = bin_table(o.bins, ndf=o.ndf, dtype=albedo.dtype)
         return albedo * improved_kernel(film, jnp.cos(theta_o), alpha, table, observer=observer,
                                         terms=o.terms, shat=o.shat, lut=lut,
                                         arithmetic=o.arithmetic)
@@ -250,7 +251,7 @@ def _bare_patch(film, theta_o, alpha, quad, method, observer, o, table):
         return albedo * bands(jnp.cos(theta_o))
     if method == "improved":  # the mean over the bins' cosines c̄_k
         if table is None:
-            table = bin_table(ndf=o.ndf, dtype=albedo.dtype)
+            table = bin_table(o.bins, ndf=o.ndf, dtype=albedo.dtype)
         cb, _ = lookup_bins(table, jnp.cos(theta_o), alpha)
         return albedo * jnp.mean(bands(cb), axis=-2)
     if method == "filtered":

@@ -479,6 +479,19 @@ def _ibl_frame_ratios():
             rows["improved (LUT)"] / rows["filtered (LUT)"], ideal_ns, grid_ns]
 
 
+def _bins_markdown():
+    from thinfilm_jax.studies.small_sources import bins_markdown
+
+    return bins_markdown(artifact("improved_bins.json"))
+
+
+def _bins_cost():
+    ns = artifact("improved_bins.json")["cost"]["ns_per_point"]
+    f = ns["filtered"]
+    return [ns["ideal"], f] + [x for k in (2, 3, 4) for x in (
+        ns[f"improved K={k}"], ns[f"improved K={k}"] / f)]
+
+
 def _small_sources_markdown():
     from thinfilm_jax.studies.small_sources import markdown
 
@@ -809,6 +822,10 @@ SPECS = [
              r"`ideal_kernel` (\S+), `improved_kernel` (\S+); `envmap_radiance` ideal (\S+), "
              r"filtered (\S+),\s+improved (\S+)\)", ("kernel_bench.json",),
              _kernel_bench_sentence),
+    Verbatim("| set | map | render | filtered | K=2 |", ("improved_bins.json",), _bins_markdown),
+    Sentence(r"minimum of 5 interleaved rounds\): ideal (\S+) ns, filtered (\S+) ns, improved K = 2 "
+             r"(\S+) ns\s+\((\S+)× filtered\), K = 3 (\S+) ns \((\S+)×\), K = 4 (\S+) ns "
+             r"\((\S+)×\)", ("improved_bins.json",), _bins_cost),
     Verbatim("| set | map | render | filtered | improved (before) |", ("small_sources.json",),
              _small_sources_markdown),
     Verbatim("| case | median \\|err\\| nm | p95 nm |", ("photo_study.json",), _photo_markdown),

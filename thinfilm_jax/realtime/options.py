@@ -24,8 +24,8 @@ R₁₃ Ŝ_j(0) where the Fourier methods would truncate at M terms. The observe
 the keyword ``observer=`` of every public function (SPEC §8).
 
 ``bins`` trades accuracy for cost in `improved`: measured under maps
-(docs/studies/improved.md, "Choosing K"), K = 2 costs ≈ 1.5× `filtered` a point and K = 3
-(the default) ≈ 2.3×, K = 4 more, with the error falling as K grows. Each K builds its own
+(docs/studies/improved.md, "Choosing K"), K = 2 costs ≈ 1.5× `filtered` a point, K = 3 (the
+default) ≈ 2.3× and K = 4 ≈ 2.9×, with the error falling as K grows. Each K builds its own
 (θ_o, α) table once (≈ 15 s on a 2-core CPU, then cached with the compiled programs).
 
 Example:

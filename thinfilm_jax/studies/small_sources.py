@@ -2,7 +2,9 @@
 
 ``python -m thinfilm_jax.studies.small_sources [--out figures] [--quick] [--no-diagnose]``
 writes ``small_sources.json``, ``small_sources.md`` (the tables of docs/studies/improved.md,
-section "Many small sources") and ``small_sources_maps.png`` (the procedural maps).
+section "Many small sources") and ``small_sources_maps.png`` (the procedural maps);
+``--bins`` writes ``improved_bins.json`` / ``.md`` instead (`bins_sweep`: every render with
+K = 2, 3, 4 bins and the cost a point of each, section "Choosing K").
 
 Maps (equirectangular 512 × 1024 like the 1k Poly Haven maps, built here, fixed seeds):
 `lamps_map` (a dim night sky with hundreds of small lamps of many colours), `facade_map`
@@ -525,6 +527,116 @@ def diagnose(name: str, cfg: Config, verbose=True, nh: int = 2048) -> list[dict]
     return rows
 
 
+BINS_SWEEP = (2, 3, 4)
+
+
+def bins_cost(bins=BINS_SWEEP, points: int = 2**18, repeats: int = 5, verbose=True) -> dict:
+    """ns a shading point of `envmap_radiance` (float32, the wide grid of
+    `kernel_bench.shading_points`, prefiltered venice_sunset, jitted whole): ideal, filtered
+    and improved with each K of `bins`, every program once per round, rounds interleaved,
+    minimum of `repeats`."""
+    from ..core.film import Film
+    from ..realtime.options import ModelOptions
+    from ..shading.ibl import envmap_radiance
+    from ..shading.prefilter import prefilter_envmap
+    from .kernel_bench import F32, shading_points
+
+    pts = shading_points(points)
+    pref = prefilter_envmap("venice_sunset").astype(F32)
+    film = Film(**pts["film"])
+    args = (film, pts["alpha"], pts["normal"], pts["wo"], pref)
+    progs = {"ideal": ("ideal", 3), "filtered": ("filtered", 3)}
+    progs.update({f"improved K={k}": ("improved", k) for k in bins})
+    compiled = {}
+    for name, (method, k) in progs.items():
+        fn = jax.jit(lambda f, a, n, v, p, m=method, k=k: envmap_radiance(
+            f, a, n, v, p, method=m, options=ModelOptions(shat="lut", bins=k)))
+        compiled[name] = fn.lower(*args).compile()
+        jax.block_until_ready(compiled[name](*args))
+    times = {name: [] for name in progs}
+    for _ in range(repeats):
+        for name, fn in compiled.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(fn(*args))
+            times[name].append(time.perf_counter() - t0)
+    ns = {name: min(t) / points * 1e9 for name, t in times.items()}
+    if verbose:
+        print("  ns a point: " + ", ".join(f"{k} {v:.0f}" for k, v in ns.items()),
+              file=sys.stderr)
+    return {"points": points, "repeats": repeats, "ns_per_point": ns}
+
+
+def bins_sweep(cfg: Config = Config(), bins=BINS_SWEEP, verbose=True) -> dict:
+    """`improved` with each K of `bins` (`ModelOptions(bins=K)`) on every render of the study
+    (dev, held-out and shipped maps): mean ΔE₀₀ and its ratio to `filtered`'s, and the cost a
+    point (`bins_cost`). The table of docs/studies/improved.md, "Choosing K"."""
+    from ..realtime.options import ModelOptions
+    from ..shading.ibl import DEFAULT_SOURCES, envmap_radiance
+    from ..shading.prefilter import prefilter_envmap
+    from ..spectral.colorimetry import bands_to_xyz, delta_e2000
+    from .render import RenderConfig, _view_azimuth, camera, render_one, scene_setups, sphere
+
+    obs = cfg.observer
+    rows = []
+    names = [("dev", n) for n in DEV_MAPS] + [("held out", n) for n in HELD_OUT_MAPS] + [
+        ("shipped", n) for n in SHIPPED_MAPS]
+    for set_name, name in names:
+        env = build_map(name)
+        pf = prefilter_envmap(env, observer=obs)
+        pi = prefilter_envmap(env, observer=obs, sources=DEFAULT_SOURCES)
+        rcfg = RenderConfig(envmaps=(name,), scenes=("fig4", "fig3"), alphas=cfg.alphas,
+                            methods=("reference",), resolution=cfg.resolution, observer=obs)
+        cache = {name: {"env": env}}
+        for setup in scene_setups(rcfg):
+            _, label, _, make_film, alpha = setup
+            ref = render_one(setup, rcfg, cache)["values"]["reference"]
+            wo, right, up = camera(_view_azimuth(env), rcfg.elevation_deg)
+            mask, n = sphere(cfg.resolution, wo, right, up)
+            pts = n[mask]
+            film = make_film(pts)
+            e = float(0.9 / max(np.percentile(bands_to_xyz(ref, obs)[:, 1], 99), 1e-12))
+
+            def de(v):
+                return float(np.mean(np.asarray(delta_e2000(np.asarray(v) * e, ref * e, obs))))
+
+            row = {"set": set_name, "map": name, "render": label.split(" | ")[0],
+                   "filtered": de(envmap_radiance(film, alpha, pts, wo, pf, method="filtered",
+                                                  observer=obs))}
+            for k in bins:
+                row[f"K={k}"] = de(envmap_radiance(film, alpha, pts, wo, pi, method="improved",
+                                                   observer=obs,
+                                                   options=ModelOptions(shat="lut", bins=k)))
+            rows.append(row)
+            if verbose:
+                print(f"  {name:24s} {row['render']:18s} " + " ".join(
+                    f"{k} {v:.2f}" for k, v in row.items() if k == "filtered" or "K=" in k),
+                      file=sys.stderr)
+    return {"bins": list(bins), "rows": rows, "cost": bins_cost(bins, verbose=verbose)}
+
+
+def bins_markdown(result) -> str:
+    ks = [f"K={k}" for k in result["bins"]]
+    ns = result["cost"]["ns_per_point"]
+    lines = ["## Choosing K: improved with K bins (mean ΔE₀₀, ÷ filtered)", "",
+             "| set | map | render | filtered | " + " | ".join(ks) + " |",
+             "|---|---|---|---|" + "---|" * len(ks)]
+    for r in result["rows"]:
+        lines.append(f"| {r['set']} | {r['map']} | {r['render']} | {r['filtered']:.2f} | "
+                     + " | ".join(f"{r[k]:.2f} ({r[k] / r['filtered']:.2f})" for k in ks)
+                     + " |")
+    worst = {k: max(r[k] / r["filtered"] for r in result["rows"]) for k in ks}
+    above3 = {k: sum(r[k] > 3.0 for r in result["rows"]) for k in ks}
+    lines.append("| **worst ratio / renders above 3 ΔE₀₀** | | | | " + " | ".join(
+        f"{worst[k]:.2f} / {above3[k]}" for k in ks) + " |")
+    lines += ["", f"Cost a shading point (float32, {result['cost']['points']:,} points of the "
+              "kernel bench's wide grid under the prefiltered venice_sunset, jitted, minimum of "
+              f"{result['cost']['repeats']} interleaved rounds): ideal {ns['ideal']:.0f} ns, "
+              f"filtered {ns['filtered']:.0f} ns, " + ", ".join(
+                  f"improved {k} {ns['improved ' + k]:.0f} ns "
+                  f"({ns['improved ' + k] / ns['filtered']:.2f}× filtered)" for k in ks) + "."]
+    return "\n".join(lines) + "\n"
+
+
 def plot_maps(path, names):
     import matplotlib
 
@@ -625,8 +737,18 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="figures")
     p.add_argument("--quick", action="store_true", help="dev maps only, 12 px (smoke test)")
     p.add_argument("--no-diagnose", action="store_true", help="skip the cause's oracle rows")
+    p.add_argument("--bins", action="store_true",
+                   help="the K sweep instead (improved_bins.json / .md): every render with "
+                        "K = 2, 3, 4 and the cost a point of each")
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
+    if args.bins:
+        from ._timing import environment, write_report
+
+        result = {"environment": environment(),
+                  **bins_sweep(Config.quick() if args.quick else Config())}
+        print(write_report(args.out, "improved_bins", result, bins_markdown))
+        return 0
     cfg = Config.quick() if args.quick else Config()
     if args.no_diagnose:
         cfg = dataclasses.replace(cfg, diagnose=False)

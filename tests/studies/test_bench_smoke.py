@@ -71,3 +71,13 @@ def test_reference_bench_tiny(tmp_path):
     assert {row["version"] for row in data["rows"]} == {"new", "old 1"}
     assert all(row["points_per_s"] > 0 for row in data["rows"]) and r["points"] > 0
     assert "× this checkout" in (tmp_path / "reference_bench.md").read_text()
+
+
+def test_bins_cost_tiny():
+    """`small_sources.bins_cost` (the cost column of "Choosing K") on 512 points, one round:
+    every program is timed."""
+    from thinfilm_jax.studies.small_sources import bins_cost
+
+    r = bins_cost(bins=(2,), points=512, repeats=1, verbose=False)
+    assert set(r["ns_per_point"]) == {"ideal", "filtered", "improved K=2"}
+    assert all(v > 0 for v in r["ns_per_point"].values())

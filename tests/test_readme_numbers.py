@@ -804,11 +804,12 @@ SPECS = [
              ("bench.json",), lambda: [artifact("bench.json")["m_selection"]["exact"][
                  "smallest_M_dE_max_below_1_theta_le_80deg"]]),
     Verbatim("| grid | airy value µs |", ("peers.json",), _peers_markdown),
-    Sentence(r"the minimum of 9\): `improved_kernel` (\S+) ns against (\S+) ns for `filtered_kernel`"
-             r"\s+\((\S+)×(?s:.*?)`envmap_radiance` takes (\S+) ns with `filtered`,\s+(\S+) ns with "
-             r"`improved` \((\S+)×(?s:.*?)sun split from the map (\S+) ns \(`filtered`\) and (\S+) ns "
-             r"\(`improved`\): `improved` with its sun\s+costs (\S+)× `filtered` as published "
-             r"\((\S+)× `filtered` with the same split\)", ("kernel_bench.json",),
+    Sentence(r"the minimum of 9\): `improved_kernel` (\S+) ns against (\S+) ns for "
+             r"`filtered_kernel`\s+\((\S+)×(?s:.*?)`envmap_radiance` takes (\S+) ns with "
+             r"`filtered`,\s+(\S+) ns with `improved` \((\S+)×(?s:.*?)sun split from the map "
+             r"(\S+) ns \(`filtered`\) and (\S+) ns \(`improved`\): `improved` with its sun"
+             r"\s+costs (\S+)× `filtered` as published \((\S+)× `filtered` with the same "
+             r"split\)", ("kernel_bench.json",),
              _improved_cost_sentence),
     Sentence(r"α = 0.25 and 0.6 \((\S+)× and (\S+)×: (\S+) and (\S+) points/s against (\S+) and "
              r"(\S+)\), met at\s+α = 0.05 \((\S+)×\)(?s:.*?)at α = 0.25: (\S+) points/s here",
@@ -823,9 +824,9 @@ SPECS = [
              r"filtered (\S+),\s+improved (\S+)\)", ("kernel_bench.json",),
              _kernel_bench_sentence),
     Verbatim("| set | map | render | filtered | K=2 |", ("improved_bins.json",), _bins_markdown),
-    Sentence(r"minimum of 5 interleaved rounds\): ideal (\S+) ns, filtered (\S+) ns, improved K = 2 "
-             r"(\S+) ns\s+\((\S+)× filtered\), K = 3 (\S+) ns \((\S+)×\), K = 4 (\S+) ns "
-             r"\((\S+)×\)", ("improved_bins.json",), _bins_cost),
+    Sentence(r"minimum of 5 interleaved rounds\): ideal (\S+) ns, filtered (\S+) ns, "
+             r"improved K = 2 (\S+) ns\s+\((\S+)× filtered\), K = 3 (\S+) ns \((\S+)×\), "
+             r"K = 4 (\S+) ns \((\S+)×\)", ("improved_bins.json",), _bins_cost),
     Verbatim("| set | map | render | filtered | improved (before) |", ("small_sources.json",),
              _small_sources_markdown),
     Verbatim("| case | median \\|err\\| nm | p95 nm |", ("photo_study.json",), _photo_markdown),

@@ -18,8 +18,10 @@ from thinfilm_jax import Film
 from thinfilm_jax.realtime.improved import bin_table
 from thinfilm_jax.shading.ibl import DEFAULT_SOURCES, envmap_radiance
 from thinfilm_jax.shading.prefilter import prefilter_envmap
-from thinfilm_jax.spectral.colorimetry import bands_to_xyz, delta_e2000
+from thinfilm_jax.spectral.colorimetry import delta_e2000
+from thinfilm_jax.spectral.spectra import DEFAULT_OBSERVER
 from thinfilm_jax.studies.render import _view_azimuth, camera, sphere
+from thinfilm_jax.studies.scene import exposure_of
 from thinfilm_jax.studies.small_sources import lamps_map, previous_improved
 
 FILM = Film(650.0, 1.3, 2.0, 0.5)
@@ -37,7 +39,7 @@ def lamps():
 
 
 def _delta_e(values, ref):
-    e = 0.9 / np.percentile(bands_to_xyz(ref)[:, 1], 99)
+    e = exposure_of(ref, DEFAULT_OBSERVER)  # the renders' rule
     return np.asarray(delta_e2000(values * e, ref * e))
 
 

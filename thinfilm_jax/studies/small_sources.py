@@ -53,6 +53,7 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -317,24 +318,31 @@ def previous_improved(film, alpha, normal, view, pref, table, *, observer):
     return out
 
 
-def bright_share(env: EnvMap, pref_plain, normal, view, alpha, factor=BRIGHT_FACTOR):
-    """Per shading point, the share of the luminance `filtered` reads at (ω_r, √α) that
-    comes from texels brighter than `factor` × the map's mean luminance (the prefiltered
-    map of those texels alone over the whole map's, both at the same level)."""
-    from ..shading.prefilter import lookup_radiance, prefilter_envmap
+def bright_prefilter(env: EnvMap, factor=BRIGHT_FACTOR):
+    """(The prefiltered map of the texels brighter than `factor` × the map's mean luminance
+    alone, the fraction of texels that are) — once per map, for `bright_share`."""
+    from ..shading.prefilter import prefilter_envmap
 
     rad = np.asarray(env.radiance)
     y = rad @ luminance_weights()
     om = texel_solid_angles(*y.shape)
     bright = y > factor * (y * om).sum() / om.sum()
-    pb = prefilter_envmap(EnvMap(np.where(bright[..., None], rad, 0.0)))
+    return prefilter_envmap(EnvMap(np.where(bright[..., None], rad, 0.0))), float(bright.mean())
+
+
+def bright_share(pref_bright, pref_plain, normal, view, alpha):
+    """Per shading point, the share of the luminance `filtered` reads at (ω_r, √α) that
+    comes from the bright texels (`bright_prefilter`: the prefiltered map of those texels
+    alone over the whole map's `pref_plain`, both at the same level)."""
+    from ..shading.prefilter import lookup_radiance
+
     co = np.sum(normal * view, -1)
     refl = jnp.asarray(2 * co[:, None] * normal - view)
     sqa = jnp.full(co.shape, np.sqrt(alpha))
     lw = luminance_weights()
-    yb = np.asarray(lookup_radiance(pb, refl, sqa)) @ lw
+    yb = np.asarray(lookup_radiance(pref_bright, refl, sqa)) @ lw
     ya = np.asarray(lookup_radiance(pref_plain, refl, sqa)) @ lw
-    return np.where(ya > 0, yb / np.where(ya > 0, ya, 1.0), 0.0), float(bright.mean())
+    return np.where(ya > 0, yb / np.where(ya > 0, ya, 1.0), 0.0)
 
 
 def regions(normal, view, share):
@@ -349,6 +357,42 @@ def regions(normal, view, share):
             "middle third": (share >= t1) & (share < t2), "high third": share >= t2}
 
 
+class Render(NamedTuple):
+    """One render of the study: its label, α, the sphere's shading points and view, the film
+    at those points, the reference (bands) and its display exposure, the reference's time."""
+
+    label: str
+    scene: str
+    alpha: float
+    points: np.ndarray
+    view: np.ndarray  # ω_o (3,)
+    film: object
+    reference: np.ndarray
+    exposure: float
+    reference_seconds: float
+
+
+def renders(name: str, env: EnvMap, cfg: Config):
+    """The study's renders of map `name` (Figure 4's scene and Figure 3's film at
+    `cfg.alphas`, `cfg.resolution` px spheres, references computed here: `render.render_one`)
+    as `Render` records, the exposure by the renders' rule (`scene.exposure_of`)."""
+    from .render import RenderConfig, _view_azimuth, camera, render_one, scene_setups, sphere
+    from .scene import exposure_of
+
+    rcfg = RenderConfig(envmaps=(name,), scenes=("fig4", "fig3"), alphas=cfg.alphas,
+                        methods=("reference",), resolution=cfg.resolution, observer=cfg.observer)
+    cache = {name: {"env": env}}
+    wo, right, up = camera(_view_azimuth(env), rcfg.elevation_deg)
+    mask, n = sphere(cfg.resolution, wo, right, up)
+    pts = n[mask]
+    for setup in scene_setups(rcfg):
+        scene, label, _, make_film, alpha = setup
+        t0 = time.perf_counter()
+        ref = render_one(setup, rcfg, cache)["values"]["reference"]
+        yield Render(label.split(" | ")[0], scene, alpha, pts, wo, make_film(pts), ref,
+                     exposure_of(ref, cfg.observer), time.perf_counter() - t0)
+
+
 def _stats(de):
     return {"mean": float(np.mean(de)), "p95": float(np.percentile(de, 95)), "n": int(de.size)}
 
@@ -359,52 +403,41 @@ def evaluate_map(name: str, cfg: Config, verbose=True) -> dict:
     from ..shading.ibl import DEFAULT_SOURCES, envmap_radiance
     from ..shading.prefilter import prefilter_envmap
     from ..shading.sources import extract_sources
-    from ..spectral.colorimetry import bands_to_xyz, delta_e2000
-    from .render import RenderConfig, _view_azimuth, camera, render_one, scene_setups, sphere
+    from ..spectral.colorimetry import delta_e2000
 
     t_map = time.perf_counter()
     env = build_map(name)
     obs = cfg.observer
-    cache = {name: {"env": env}}
     prefs = {"filtered": prefilter_envmap(env, observer=obs),
              "improved": prefilter_envmap(env, observer=obs, sources=DEFAULT_SOURCES)}
+    pref_bright, share_info = bright_prefilter(env)
     table = bin_table()
-    rcfg = RenderConfig(envmaps=(name,), scenes=("fig4", "fig3"), alphas=cfg.alphas,
-                        methods=("reference",), resolution=cfg.resolution, observer=obs)
     n_src = extract_sources(env, max_sources=DEFAULT_SOURCES)[1].count
-    renders, pooled = [], {m: [] for m in METHODS}
+    rows, pooled = [], {m: [] for m in METHODS}
     pooled_regions = []
-    share_info = None
-    for setup in scene_setups(rcfg):
-        scene, label, _, make_film, alpha = setup
-        t0 = time.perf_counter()
-        ref = render_one(setup, rcfg, cache)["values"]["reference"]
-        t_ref = time.perf_counter() - t0
-        wo, right, up = camera(_view_azimuth(env), rcfg.elevation_deg)
-        mask, n = sphere(cfg.resolution, wo, right, up)
-        pts = n[mask]
-        film = make_film(pts)
+    for r in renders(name, env, cfg):
+        pts, wo, e = r.points, r.view, r.exposure
         view = np.broadcast_to(wo, pts.shape)
-        share, share_info = bright_share(env, prefs["filtered"], pts, view, alpha)
-        e = float(0.9 / max(np.percentile(bands_to_xyz(ref, obs)[:, 1], 99), 1e-12))
-        vals = {m: np.asarray(envmap_radiance(film, alpha, pts, wo, prefs[m], method=m,
+        share = bright_share(pref_bright, prefs["filtered"], pts, view, r.alpha)
+        vals = {m: np.asarray(envmap_radiance(r.film, r.alpha, pts, wo, prefs[m], method=m,
                                               observer=obs))
                 for m in ("filtered", "improved")}
         vals["improved (before)"] = np.asarray(jax.jit(
             lambda f, a, nn, v, p, t: previous_improved(f, a, nn, v, p, t, observer=obs))(
-            film, jnp.full(len(pts), alpha), jnp.asarray(pts), jnp.asarray(view),
+            r.film, jnp.full(len(pts), r.alpha), jnp.asarray(pts), jnp.asarray(view),
             prefs["improved"], table))
-        de = {m: np.asarray(delta_e2000(v * e, ref * e, obs)) for m, v in vals.items()}
+        de = {m: np.asarray(delta_e2000(v * e, r.reference * e, obs)) for m, v in vals.items()}
         reg = regions(pts, view, share)
-        row = {"label": label.split(" | ")[0], "scene": scene, "alpha": alpha,
+        t_ref = r.reference_seconds
+        row = {"label": r.label, "scene": r.scene, "alpha": r.alpha,
                "reference_seconds": t_ref,
-               "regions": {r: {m: _stats(de[m][k]) for m in METHODS} for r, k in reg.items()
+               "regions": {g: {m: _stats(de[m][k]) for m in METHODS} for g, k in reg.items()
                            if k.any()}}
         row["ratio"] = row["regions"]["all"]["improved"]["mean"] / \
             row["regions"]["all"]["filtered"]["mean"]
         row["ratio_before"] = row["regions"]["all"]["improved (before)"]["mean"] / \
             row["regions"]["all"]["filtered"]["mean"]
-        renders.append(row)
+        rows.append(row)
         for m in METHODS:
             pooled[m].append(de[m])
         pooled_regions.append(reg)
@@ -416,7 +449,7 @@ def evaluate_map(name: str, cfg: Config, verbose=True) -> dict:
     cat = {m: np.concatenate(v) for m, v in pooled.items()}
     regs = {r: np.concatenate([g[r] for g in pooled_regions]) for r in pooled_regions[0]}
     out = {"map": name, "sources_split": int(n_src), "bright_texels": share_info,
-           "renders": renders,
+           "renders": rows,
            "pooled": {r: {m: _stats(cat[m][k]) for m in METHODS} for r, k in regs.items()
                       if k.any()},
            "seconds": time.perf_counter() - t_map}
@@ -425,7 +458,7 @@ def evaluate_map(name: str, cfg: Config, verbose=True) -> dict:
     out["ratio_before"] = a["improved (before)"]["mean"] / a["filtered"]["mean"]
     out["meets_target"] = all(r["ratio"] <= TARGET_RATIO
                               and r["regions"]["all"]["improved"]["mean"] <= TARGET_DE
-                              for r in renders)
+                              for r in rows)
     return out
 
 
@@ -444,28 +477,22 @@ def diagnose(name: str, cfg: Config, verbose=True, nh: int = 2048) -> list[dict]
     from ..shading.ibl import DEFAULT_SOURCES
     from ..shading.ibl_reference import _lobe_cos_weight, resample_factor, texel_nodes
     from ..shading.prefilter import bin_radiance, lookup_albedo, prefilter_envmap
-    from ..spectral.colorimetry import bands_to_xyz, delta_e2000
+    from ..spectral.colorimetry import delta_e2000
     from ..spectral.uplift import cross_band_name
-    from .render import RenderConfig, _view_azimuth, camera, render_one, scene_setups, sphere
 
     env = build_map(name)
     obs = cfg.observer
     cross = cross_band_name(obs)
-    cache = {name: {"env": env}}
     pref = prefilter_envmap(env, observer=obs, sources=DEFAULT_SOURCES)
+    pref_plain = prefilter_envmap(env, observer=obs)
+    pref_bright, _ = bright_prefilter(env)
     table = bin_table()
     k = table.bins
     lw = jnp.asarray(luminance_weights())
-    rcfg = RenderConfig(envmaps=(name,), scenes=("fig4", "fig3"), alphas=cfg.alphas,
-                        methods=("reference",), resolution=cfg.resolution, observer=obs)
     rows = []
-    for setup in scene_setups(rcfg):
-        scene, label, _, make_film, alpha = setup
-        ref = render_one(setup, rcfg, cache)["values"]["reference"]
-        wo, right, up = camera(_view_azimuth(env), rcfg.elevation_deg)
-        mask, n = sphere(cfg.resolution, wo, right, up)
-        pts = n[mask]
-        film = make_film(pts)
+    for r in renders(name, env, cfg):
+        alpha, pts, wo, film, ref, e = (r.alpha, r.points, r.view, r.film, r.reference,
+                                        r.exposure)
         f = resample_factor(env.shape[0], alpha, 256)  # the map the reference integrates
         renv = downsample(env, f) if f > 1 else env
         d, wt, idx = texel_nodes(*renv.shape, 3)
@@ -506,19 +533,17 @@ def diagnose(name: str, cfg: Config, verbose=True, nh: int = 2048) -> list[dict]
             r = jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * light[..., None, :], -1)
             return np.asarray(jnp.sum(r, -2) * (a / k)[:, None])
 
-        e = float(0.9 / max(np.percentile(bands_to_xyz(ref, obs)[:, 1], 99), 1e-12))
-        share, _ = bright_share(env, prefilter_envmap(env, observer=obs), pts,
-                                np.broadcast_to(wo, pts.shape), alpha)
-        reg = regions(pts, np.broadcast_to(wo, pts.shape), share)
+        view = np.broadcast_to(wo, pts.shape)
+        reg = regions(pts, view, bright_share(pref_bright, pref_plain, pts, view, alpha))
         variants = {"exact bin light, uniform-light cosines": model(cb, sb, el),
                     "exact bin light, light-weighted cosines": model(cy, sy, el),
                     "before's reads, light-weighted cosines": model(cy, sy, reads)}
-        row = {"label": label.split(" | ")[0], "regions": {}}
+        row = {"label": r.label, "regions": {}}
         for key, v in variants.items():
             de = np.asarray(delta_e2000(v * e, ref * e, obs))
-            for r, m in reg.items():
+            for g, m in reg.items():
                 if m.any():
-                    row["regions"].setdefault(r, {})[key] = _stats(de[m])
+                    row["regions"].setdefault(g, {})[key] = _stats(de[m])
         rows.append(row)
         if verbose:
             print(f"  diagnose {name} {row['label']}: " + ", ".join(
@@ -573,8 +598,7 @@ def bins_sweep(cfg: Config = Config(), bins=BINS_SWEEP, verbose=True) -> dict:
     from ..realtime.options import ModelOptions
     from ..shading.ibl import DEFAULT_SOURCES, envmap_radiance
     from ..shading.prefilter import prefilter_envmap
-    from ..spectral.colorimetry import bands_to_xyz, delta_e2000
-    from .render import RenderConfig, _view_azimuth, camera, render_one, scene_setups, sphere
+    from ..spectral.colorimetry import delta_e2000
 
     obs = cfg.observer
     rows = []
@@ -584,22 +608,14 @@ def bins_sweep(cfg: Config = Config(), bins=BINS_SWEEP, verbose=True) -> dict:
         env = build_map(name)
         pf = prefilter_envmap(env, observer=obs)
         pi = prefilter_envmap(env, observer=obs, sources=DEFAULT_SOURCES)
-        rcfg = RenderConfig(envmaps=(name,), scenes=("fig4", "fig3"), alphas=cfg.alphas,
-                            methods=("reference",), resolution=cfg.resolution, observer=obs)
-        cache = {name: {"env": env}}
-        for setup in scene_setups(rcfg):
-            _, label, _, make_film, alpha = setup
-            ref = render_one(setup, rcfg, cache)["values"]["reference"]
-            wo, right, up = camera(_view_azimuth(env), rcfg.elevation_deg)
-            mask, n = sphere(cfg.resolution, wo, right, up)
-            pts = n[mask]
-            film = make_film(pts)
-            e = float(0.9 / max(np.percentile(bands_to_xyz(ref, obs)[:, 1], 99), 1e-12))
+        for r in renders(name, env, cfg):
+            film, alpha, pts, wo = r.film, r.alpha, r.points, r.view
 
-            def de(v):
-                return float(np.mean(np.asarray(delta_e2000(np.asarray(v) * e, ref * e, obs))))
+            def de(v, r=r):
+                return float(np.mean(np.asarray(delta_e2000(np.asarray(v) * r.exposure,
+                                                            r.reference * r.exposure, obs))))
 
-            row = {"set": set_name, "map": name, "render": label.split(" | ")[0],
+            row = {"set": set_name, "map": name, "render": r.label,
                    "filtered": de(envmap_radiance(film, alpha, pts, wo, pf, method="filtered",
                                                   observer=obs))}
             for k in bins:

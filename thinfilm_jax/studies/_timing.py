@@ -61,6 +61,30 @@ def time_host(fn, repeats: int) -> Timing:
     return Timing(first, statistics.median(ts), min(ts), max(ts), len(ts))
 
 
+def time_interleaved(calls: dict, repeats: int, on_round=None) -> tuple[dict, list]:
+    """Warm times of several programs measured together: each of `calls` ({name: (fn,
+    args)}, already compiled and called once) once per round, `repeats` rounds, so that a
+    change of the machine's load falls on all of them alike. Returns ({name: [seconds per
+    round]}, [1-min load average before each round and after the last]); `on_round(i, load)`
+    is called after round i (a progress line)."""
+    import os
+
+    def load():
+        return list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+
+    times, loads = {name: [] for name in calls}, []
+    for i in range(repeats):
+        loads.append(load())
+        for name, (fn, args) in calls.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(fn(*args))
+            times[name].append(time.perf_counter() - t0)
+        if on_round is not None:
+            on_round(i, loads[-1])
+    loads.append(load())
+    return times, loads
+
+
 def log(msg: str, verbose: bool):
     """Progress line on stderr."""
     if verbose:

@@ -69,7 +69,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._timing import environment, log, write_report
+from ._timing import environment, log, time_interleaved, write_report
 
 F32 = jnp.float32
 PEAK_VALUES = 2**20
@@ -314,7 +314,7 @@ def run_reference_bench(out="figures", *, baselines=(), alphas=(0.05, 0.25, 0.6)
     versions = {"new": current}
     for i, b in enumerate(baselines):
         versions[f"old {i + 1}"] = load_package(b, alias=f"thinfilm_jax_baseline{i}")
-    rows, timed = [], []
+    rows, calls = [], {}
     for version, pkg in versions.items():
         emap = _module(pkg, "shading.envmap", "envmap").load_envmap("venice_sunset")
         ibl = _module(pkg, "shading.ibl", "ibl")
@@ -329,18 +329,14 @@ def run_reference_bench(out="figures", *, baselines=(), alphas=(0.05, 0.25, 0.6)
             t0 = time.perf_counter()
             jax.block_until_ready(call(*args))
             row = {"version": version, "alpha": alpha, "points": k,
-                   "first_call_s": time.perf_counter() - t0, "times_s": []}
+                   "first_call_s": time.perf_counter() - t0}
             rows.append(row)
-            timed.append((row, call, args))
+            calls[len(rows) - 1] = (call, args)
             log(f"  {version} α = {alpha:g}: first call {row['first_call_s']:.1f} s", verbose)
-    loads = []
-    for i in range(repeats):
-        loads.append(_load())
-        for row, fn, args in timed:
-            row["times_s"].append(_timed(fn, args))
-        log(f"  round {i + 1}/{repeats}, load {loads[-1]}", verbose)
-    for row in rows:
-        row["warm_s"] = min(row.pop("times_s"))
+    times, loads = time_interleaved(calls, repeats, lambda i, load: log(
+        f"  round {i + 1}/{repeats}, load {load}", verbose))
+    for i, row in enumerate(rows):
+        row["warm_s"] = min(times[i])
         row["points_per_s"] = k / row["warm_s"]
         row["compile_s"] = max(row["first_call_s"] - row["warm_s"], 0.0)
     by = {(r["version"], r["alpha"]): r for r in rows}

@@ -564,6 +564,7 @@ def bins_cost(bins=BINS_SWEEP, points: int = 2**18, repeats: int = 5, verbose=Tr
     from ..realtime.options import ModelOptions
     from ..shading.ibl import envmap_radiance
     from ..shading.prefilter import prefilter_envmap
+    from ._timing import time_interleaved
     from .kernel_bench import F32, shading_points
 
     pts = shading_points(points)
@@ -572,18 +573,13 @@ def bins_cost(bins=BINS_SWEEP, points: int = 2**18, repeats: int = 5, verbose=Tr
     args = (film, pts["alpha"], pts["normal"], pts["wo"], pref)
     progs = {"ideal": ("ideal", 3), "filtered": ("filtered", 3)}
     progs.update({f"improved K={k}": ("improved", k) for k in bins})
-    compiled = {}
+    calls = {}
     for name, (method, k) in progs.items():
         fn = jax.jit(lambda f, a, n, v, p, m=method, k=k: envmap_radiance(
             f, a, n, v, p, method=m, options=ModelOptions(shat="lut", bins=k)))
-        compiled[name] = fn.lower(*args).compile()
-        jax.block_until_ready(compiled[name](*args))
-    times = {name: [] for name in progs}
-    for _ in range(repeats):
-        for name, fn in compiled.items():
-            t0 = time.perf_counter()
-            jax.block_until_ready(fn(*args))
-            times[name].append(time.perf_counter() - t0)
+        calls[name] = (fn.lower(*args).compile(), args)
+        jax.block_until_ready(calls[name][0](*args))
+    times, _ = time_interleaved(calls, repeats)
     ns = {name: min(t) / points * 1e9 for name, t in times.items()}
     if verbose:
         print("  ns a point: " + ", ".join(f"{k} {v:.0f}" for k, v in ns.items()),

@@ -203,26 +203,6 @@ def _load_theta(args, shape) -> np.ndarray:
     return np.deg2rad(deg)
 
 
-def _save_png(path: Path, d: np.ndarray, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..core._io import atomic_write
-
-    h, w = d.shape
-    fig, ax = plt.subplots(figsize=(5.2, 4.4 * h / max(w, 1) + 0.6))
-    im = ax.imshow(d, cmap="viridis", interpolation="nearest")
-    ax.set_xlabel("x (pixel)")
-    ax.set_ylabel("y (pixel)")
-    ax.set_title(title, fontsize=8)
-    fig.colorbar(im, ax=ax, label="thickness (nm)")
-    fig.tight_layout()
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
-    plt.close(fig)
-
-
 def _gltf_problem(args) -> str | None:
     """Why the film of `args` cannot be written as a glTF material (None: it can)."""
     if "eta_film" in args.free:
@@ -334,7 +314,9 @@ def run_fit_map_cli(args) -> int:
              f"η₂={args.eta_film_index.text},\n"
              f"η₃={args.eta_base_index.text}+{args.kappa_base:g}i, method={args.method}, "
              f"τ={args.smoothness if args.smoothness else 'none'} nm")
-    _save_png(out / "thickness_map.png", d, title)
+    from ._output import save_thickness_png
+
+    save_thickness_png(out / "thickness_map.png", d, title)
     gltf = None
     if getattr(args, "gltf", None) is not None:
         from ..interop.gltf import EXTENSION, write_gltf

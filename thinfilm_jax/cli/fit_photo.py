@@ -99,28 +99,6 @@ def _illuminant(text: str):
     return text
 
 
-def _save_png(path: Path, d, amb, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..core._io import atomic_write
-
-    h, w = d.shape
-    fig, ax = plt.subplots(figsize=(5.4, 4.4 * h / max(w, 1) + 0.7))
-    im = ax.imshow(d, cmap="viridis", interpolation="nearest")
-    if amb.any():
-        ax.contourf(amb.astype(float), levels=[0.5, 1.5], colors="none", hatches=["////"])
-    ax.set_xlabel("x (pixel)")
-    ax.set_ylabel("y (pixel)")
-    ax.set_title(title, fontsize=7)
-    fig.colorbar(im, ax=ax, label="thickness (nm)")
-    fig.tight_layout()
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
-    plt.close(fig)
-
-
 def _save_exr(path: Path, maps) -> None:
     import OpenImageIO as oiio
 
@@ -180,7 +158,9 @@ def run_photo(args) -> int:
              f"η₂={args.eta_film_index.text} on η₃={args.eta_base_index.text}, "
              f"τ={args.smoothness or 'none'} nm\nreduced χ²={res.reduced_chi2:.3g}, "
              f"exposure {res.exposure:.3g}; hatched: ambiguous fringe order")
-    _save_png(out / "thickness.png", d, amb, title)
+    from ._output import save_thickness_png
+
+    save_thickness_png(out / "thickness.png", d, title, amb)
     summary = {"photo": str(image), "shape": [h, w],
                "settings": {"camera": args.camera, "illuminant": args.illuminant,
                             "encoding": args.encoding, "bit_depth": args.bit_depth,

@@ -87,13 +87,14 @@ from ..core.stack import Stack
 from ..optics.stack import stack_reflectance_traced
 from ..spectral.camera import Camera, camera_response, sensitivity_basis
 from .engine import covariance, levenberg_marquardt
+from .photo_screen import (DISTINCT_NM, bucket, chunks, closed_gains, features,
+                           matrix_from_pixels, pad_to, reference_gains, residual, screen_all,
+                           search_gains)
 
 __all__ = ["PhotoResult", "fit_photo", "photo_colours", "render_photo"]
 
 _HI = jax.lax.Precision.HIGHEST
 _CANDIDATES = 4  # local minima per pixel kept for the neighbour prior
-_EXPOSURE_LADDER = 2.0 ** np.arange(-2.0, 2.01, 0.5)  # × the brightness-matched exposure
-_SUBSAMPLE = 3000  # pixels for the gain search without references
 #: the patch quadrature of a rough film: against (48, 48), 1.3e-6 (oxide on Si) and 9.4e-7
 #: (soap) of the largest colour over 0–2000 nm at α = 0.3, θ_o = 0.4 (measured), far below
 #: the model floor, at 1/16 of the cost
@@ -107,8 +108,7 @@ _GAIN_PIXELS = 16384  # pixels of the gain alternation (and every pad pixel)
 _GAIN_ROUNDS = 8  # alternations of the gains (an unknown camera's matrix) with the thicknesses
 _BASIS_ROUNDS = 3  # an unknown camera's sensitivities alternating with screened thicknesses
 _PAD_WEIGHT = 3.0  # × the equal-weight factor: the pads are known, the rest is fitted
-_BASIS_SMOOTHING = 1e-2  # the sensitivities' second-difference penalty (`_matrix_from_pixels`)
-_DISTINCT_NM = 15.0  # two local minima this far apart are different fringe orders
+_BASIS_SMOOTHING = 1e-2  # second-difference penalty of the sensitivities (`matrix_from_pixels`)
 
 
 class PhotoResult(NamedTuple):
@@ -247,111 +247,7 @@ def _hermite(d, lo, h, s, ds):
     return h00 * s[i] + h10 * h * ds[i] + h01 * s[i + 1] + h11 * h * ds[i + 1]
 
 
-# ----------------------------------------------------------------------------- screen
-@functools.partial(jax.jit, static_argnames=("k",))
-def _screen(obs, sig, cens, feats, grid, k):
-    """The k lowest local minima of χ²_p(d_g) over the screen grid `grid` for each pixel of a
-    chunk (P,), each at least `_DISTINCT_NM` from the better ones (distinct fringe orders):
-    grid indices (P, k) and χ² (P, k) (+inf where a pixel has fewer minima).
-
-    Channels censored at 0 or at full scale (`cens` 1 / 2) cost only on the wrong side
-    (`_residual`). χ² is one matrix product: pixel terms (P, 12) against the grid's
-    `feats` (G, 12) = [pred², pred, relu(pred − b)², relu(1 − pred)²] per channel (b the
-    black level, `_censoring`), plus Σ w o²."""
-    w = 1.0 / (sig * sig)  # (P, 3)
-    wu, wl, wh = (w * (cens == c).astype(w.dtype) for c in (0, 1, 2))
-    a = jnp.concatenate([wu, -2.0 * obs * wu, wl, wh], axis=-1)  # (P, 12)
-    chi = jnp.sum(obs * obs * wu, axis=-1)[:, None] + jnp.matmul(a, feats.T, precision=_HI)
-    pad = jnp.full((chi.shape[0], 1), jnp.inf, chi.dtype)
-    left = jnp.concatenate([pad, chi[:, :-1]], axis=-1)
-    right = jnp.concatenate([chi[:, 1:], pad], axis=-1)
-    local = jnp.where((chi <= left) & (chi < right), chi, jnp.inf)
-    tops, chis = [], []
-    for _ in range(k):  # the best minimum, then the best ≥ _DISTINCT_NM from those taken, …
-        i = jnp.argmin(local, axis=-1)
-        tops.append(i)
-        chis.append(jnp.take_along_axis(local, i[:, None], -1)[:, 0])
-        local = jnp.where(jnp.abs(grid[None, :] - grid[i][:, None]) < _DISTINCT_NM, jnp.inf,
-                          local)
-    return jnp.stack(tops, -1), jnp.stack(chis, -1)
-
-
-def _features(pred, black):
-    """(G, 12) grid terms of `_screen` from the predictions (G, 3) and the black level."""
-    relu = np.maximum
-    return jnp.asarray(np.concatenate([pred * pred, pred, relu(pred - black, 0.0) ** 2,
-                                       relu(1.0 - pred, 0.0) ** 2], axis=-1))
-
-
-def _residual(pred, o, sg, cens, black):
-    """(pred − o)/σ per channel; a channel censored at black (1) costs relu(pred − b)/σ, one
-    at full scale (2) relu(1 − pred)/σ: a clipped reading says only on which side the truth
-    is (b the black level, `_censoring`)."""
-    return jnp.where(cens == 0, pred - o,
-                     jnp.where(cens == 1, jax.nn.relu(pred - black),
-                               jax.nn.relu(1.0 - pred))) / sg
-
-
-def _bucket(n, chunk):
-    """Batch size of n pixels: the next power of two up to `chunk` (padded), so that images of
-    many sizes share a few compiled programs."""
-    return min(chunk, 1 << max(int(n) - 1, 0).bit_length())
-
-
-def _chunks(n, size):
-    return [slice(i, min(i + size, n)) for i in range(0, n, size)]
-
-
-def _pad_to(a, size):
-    """Pad the leading axis of a chunk to `size` (repeating its last row): one compilation."""
-    n = a.shape[0]
-    return a if n == size else np.concatenate([a, np.repeat(a[-1:], size - n, axis=0)])
-
-
-def _screen_all(obs, sig, cens, feats, grid, k, chunk, bar):
-    out = []
-    size = _bucket(obs.shape[0], chunk)
-    for s in _chunks(obs.shape[0], size):
-        n = s.stop - s.start
-        r = _screen(*(jnp.asarray(_pad_to(a[s], size)) for a in (obs, sig, cens)), feats,
-                    grid, k)
-        out.append([np.asarray(v)[:n] for v in r])
-        if bar is not None:
-            bar.update(n)
-    return [np.concatenate(v) for v in zip(*out)]
-
-
-# ----------------------------------------------------------------------------- gains
-def _closed_gains(obs, sig, cens, s_c):
-    """Per-channel least squares g_c = Σ o s / σ² / Σ s² / σ² over the uncensored readings
-    (s_c = C s, (P, 3))."""
-    w = (cens == 0) / (sig * sig)
-    return np.sum(obs * s_c * w, axis=0) / np.maximum(np.sum(s_c * s_c * w, axis=0), 1e-300)
-
-
-def _search_gains(obs, sig, cens, s_screen, grid, chunk, black):
-    """Gains without references (module docstring, step 2): alternating minimisation from a
-    ladder of exposures around the brightness-matched one, on a subsample, on the screen
-    grid's colours `s_screen` (G, 3)."""
-    step = max(1, obs.shape[0] // _SUBSAMPLE)
-    o, sg, cs = obs[::step], sig[::step], cens[::step]
-    e0 = np.median(o[:, 1]) / max(np.median(s_screen[:, 1]), 1e-12)
-    best = (np.inf, None)
-    for e in e0 * _EXPOSURE_LADDER:
-        g = np.full(3, e)
-        for _ in range(8):
-            idx, chi = _screen_all(o, sg, cs, _features(s_screen * g, black), grid, 1, chunk,
-                                   None)
-            g_new = _closed_gains(o, sg, cs, s_screen[idx[:, 0]])
-            if np.allclose(g_new, g, rtol=1e-4):
-                break
-            g = g_new
-        total = float(np.sum(np.minimum(chi[:, 0], 1e6)))
-        if total < best[0]:
-            best = (total, g)
-    return best[1]
-
-
+# ----------------------------------------------------------------------------- references
 def _read_reference(reference, valid):
     """[(mask (H, W) bool of usable pixels, thickness nm)] from the user's reference list."""
     regions = []
@@ -367,60 +263,6 @@ def _read_reference(reference, valid):
     return regions
 
 
-def _reference_gains(obs_img, sig_img, cens_img, regions, s_of, kind):
-    """(gains (3,), C (3, 3), C's stderr (3, 3)) from regions of known thickness."""
-    rows = [(obs_img[m], np.where(cens_img[m] == 0, sig_img[m], np.inf), s_of(d))
-            for m, d in regions]
-    if kind != "unknown":
-        o = np.concatenate([r[0] for r in rows])
-        sg = np.concatenate([r[1] for r in rows])
-        s = np.concatenate([np.broadcast_to(r[2], r[0].shape) for r in rows])
-        return _closed_gains(o, sg, np.zeros(o.shape, int), s), np.eye(3), np.zeros((3, 3))
-    thick = sorted({round(d, 6) for _, d in regions})
-    s_ref = np.stack([r[2] for r in rows])
-    sv = np.linalg.svd(s_ref, compute_uv=False) if len(rows) >= 3 else np.zeros(1)
-    if len(thick) < 3 or sv[-1] < 1e-3 * sv[0]:
-        raise ValueError(f"camera='unknown' fits a 3 × 3 matrix from reference regions: it needs "
-                         f"at least 3 regions whose thicknesses give distinct colours, got "
-                         f"{len(rows)} region(s) at {thick} nm")
-    # o_pc = Σ_j M_cj s_j: per channel a weighted linear regression over the reference pixels
-    m_rows, se_rows = [], []
-    for c in range(3):
-        a = np.concatenate([np.broadcast_to(r[2], (r[0].shape[0], 3)) / r[1][:, c:c + 1]
-                            for r in rows])
-        b = np.concatenate([r[0][:, c] / r[1][:, c] for r in rows])
-        coef, *_ = np.linalg.lstsq(a, b, rcond=None)
-        dof = max(a.shape[0] - 3, 1)
-        s2 = max(float(np.sum((a @ coef - b) ** 2)) / dof, 1.0)
-        cov = s2 * np.linalg.pinv(a.T @ a)
-        m_rows.append(coef)
-        se_rows.append(np.sqrt(np.abs(np.diag(cov))))
-    m, se = np.stack(m_rows), np.stack(se_rows)
-    g = m.sum(axis=1)
-    if np.any(g <= 0):
-        raise ValueError("the fitted camera matrix maps white to a non-positive colour: the "
-                         "reference regions do not determine it (check masks and thicknesses)")
-    return g, m / g[:, None], se / g[:, None]
-
-
-def _matrix_from_pixels(obs, sig, cens, s_fit, smooth: float = 0.0):
-    """M (3, B) with o_c ≈ Σ_b M_cb s_b over every uncensored reading: per channel a
-    weighted linear least-squares fit (the unknown camera's self-calibration), with a
-    penalty `smooth` · tr(XᵀWX)/tr(DᵀD) · ‖D m_c‖² on the second differences D of the
-    coefficients (smooth sensitivities on a hat basis; 0 for the 3 × 3 matrix)."""
-    b = s_fit.shape[1]
-    d2 = np.diff(np.eye(b), 2, axis=0)
-    rows = []
-    for c in range(3):
-        w = (cens[:, c] == 0) / sig[:, c]
-        x = s_fit * w[:, None]
-        a = x.T @ x
-        reg = smooth * np.trace(a) / max(np.trace(d2.T @ d2), 1e-300)
-        rows.append(np.linalg.solve(a + reg * d2.T @ d2 + 1e-12 * np.trace(a) / b * np.eye(b),
-                                    x.T @ (obs[:, c] * w)))
-    return np.stack(rows)
-
-
 # ----------------------------------------------------------------------------- refine
 @functools.partial(jax.jit, static_argnames=("steps", "want_se"))
 def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, black,
@@ -432,7 +274,7 @@ def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds
     def pixel(o, sg, cs, x0, q, ok):
         def data(x):
             pred = jnp.matmul(gm, _hermite(x[0], lo, h, s_tab, ds_tab), precision=_HI)
-            return _residual(pred, o, sg, cs, black)
+            return residual(pred, o, sg, cs, black)
 
         def res(x):
             return jnp.concatenate([data(x), jnp.where(ok, (x[0] - q) / tau, 0.0)])
@@ -621,11 +463,11 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     known = known[where]
     pads = np.isfinite(known)
     if regions:
-        gains, cmat, cmat_se = _reference_gains(photo.linear, sig_img, cens_img, regions,
+        gains, cmat, cmat_se = reference_gains(photo.linear, sig_img, cens_img, regions,
                                                 s_of, cam.kind)
     else:
         cmat, cmat_se = np.eye(3), np.zeros((3, 3))
-        gains = _search_gains(obs, sig, cens, table[3][coarse], jnp.asarray(grid[coarse]),
+        gains = search_gains(obs, sig, cens, table[3][coarse], jnp.asarray(grid[coarse]),
                               chunk, black)
     tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
     k = _CANDIDATES
@@ -636,7 +478,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         """3. screen: the k best distinct local minima per pixel; 4. refine each; choose
         (best, or by the neighbour prior); → (d_best, d_alt, has_alt), pads at their d."""
         s_tab = table[3]
-        top, top_chi = _screen_all(obs, sig, cens, _features(s_tab[coarse] @ gm.T, black),
+        top, top_chi = screen_all(obs, sig, cens, features(s_tab[coarse] @ gm.T, black),
                                    jnp.asarray(grid[coarse]), k, chunk, bar)
         cand0 = grid[coarse][top]  # (n, k); a missing minimum repeats the pixel's best
         cand0 = np.where(np.isfinite(top_chi), cand0, cand0[:, :1])
@@ -653,7 +495,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
                         tau).ravel()[where]
         rows = np.arange(n)
         d_best = np.where(pads, known, cd[rows, pick])
-        other = np.where(np.abs(cd - d_best[:, None]) >= _DISTINCT_NM, cchi, np.inf)
+        other = np.where(np.abs(cd - d_best[:, None]) >= DISTINCT_NM, cchi, np.inf)
         alt = np.argmin(other, axis=-1)
         has_alt = np.isfinite(other[rows, alt])
         return d_best, np.where(has_alt, cd[rows, alt], d_best), has_alt
@@ -662,12 +504,12 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         s_fit = _host_hermite(d, lo, step, *table[3:5])
         o, sg, cs, pd = obs[sub], sig[sub], cens[sub], pads[sub]
         if kind == "unknown":
-            return _matrix_from_pixels(o, sg, cs, s_fit)
+            return matrix_from_pixels(o, sg, cs, s_fit)
         if kind == "basis":  # the pads, known, weigh as much as all other pixels together
             up = np.sqrt(max((pd.size - pd.sum()) / max(pd.sum(), 1), 1.0)) * _PAD_WEIGHT
-            return _matrix_from_pixels(o, sg / np.where(pd, up, 1.0)[:, None], cs, s_fit,
+            return matrix_from_pixels(o, sg / np.where(pd, up, 1.0)[:, None], cs, s_fit,
                                        smooth=_BASIS_SMOOTHING)
-        return _closed_gains(o, sg, cs, s_fit @ cmat.T)[:, None] * cmat
+        return closed_gains(o, sg, cs, s_fit @ cmat.T)[:, None] * cmat
 
     try:
         gm = gains[:, None] * cmat
@@ -723,7 +565,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     if report_floor != model_floor:
         pred = _host_hermite(d, lo, step, *table[3:5]) @ gm.T
         sig_rep = sigma(report_floor).reshape(-1, 3)[where]
-        chi = np.sum(np.asarray(_residual(jnp.asarray(pred), jnp.asarray(obs), jnp.asarray(sig_rep),
+        chi = np.sum(np.asarray(residual(jnp.asarray(pred), jnp.asarray(obs), jnp.asarray(sig_rep),
                                           jnp.asarray(cens), black)) ** 2, axis=-1)
     rchi2 = float(np.sum(chi) / dof)
     robust = float(np.median(chi) / _CHI2_2_MEDIAN)
@@ -791,10 +633,10 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
               jnp.asarray(lo), jnp.asarray(step), jnp.asarray(s_tab), jnp.asarray(ds_tab),
               jnp.asarray(black))
     out = []
-    size = _bucket(n, chunk)
-    for s in _chunks(n, size):
+    size = bucket(n, chunk)
+    for s in chunks(n, size):
         m = s.stop - s.start
-        r = _refine(*(jnp.asarray(_pad_to(a[s], size)) for a in (obs, sig, cens, d0, nb, ok)),
+        r = _refine(*(jnp.asarray(pad_to(a[s], size)) for a in (obs, sig, cens, d0, nb, ok)),
                     *consts, steps=steps, want_se=want_se)
         out.append([np.asarray(v)[:m] for v in r])
         if bar is not None:

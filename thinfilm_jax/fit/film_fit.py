@@ -35,7 +35,8 @@ so the solver can never leave the physical domain (d ≥ 0, η ∈ [1, 4], κ �
 **Fringe order.** The loss is multimodal in thickness: neighbouring minima are one
 interference order apart (~220 nm for RGB patches of an η₂ = 1.3 film; see
 `notebooks/fitting.ipynb`), and a local solver started a few hundred nm away stops in the
-wrong one. When the thickness is free the solve is multi-start (`fit.multistart`), in these stages:
+wrong one. When the thickness is free the solve is multi-start (`fit.multistart`), in these
+stages:
 
 1. *screen*: the loss at `n_starts` thicknesses (default 64: midpoints of equal cells of the
    thickness box, 31 nm apart over [0, 2000] nm, so every ~±100 nm basin holds several) plus

@@ -48,9 +48,9 @@ warned, and the call's time. The first call of each scene is repeated: its compi
 reported apart (the other rows reuse most programs). A 1-megapixel soap JPEG times one more
 call.
 
-**Spectra** (`spectra_study`): normal-incidence reflectance of a soap film on 400–800 nm at
-1 nm, the exact R plus Gaussian noise, optionally divided by a mis-calibrated lamp (a ±5 %
-tilt), for films of 120 nm (less than one fringe) to 5 µm (~17 orders): `fit_spectrum`
+**Spectra** (`photo_spectra.spectra_study`): normal-incidence reflectance of a soap film on
+400–800 nm at 1 nm, the exact R plus Gaussian noise, optionally divided by a mis-calibrated
+lamp (a ±5 % tilt), for films of 120 nm (less than one fringe) to 5 µm (~17 orders): `fit_spectrum`
 (exact model, thickness free in [0, 6000] nm) against optifik's three estimators
 (Ziapkoff, Boulogne, Salonen & Rio, Eur. Phys. J. E 49, 4 (2026)): the Fourier transform in
 n/λ (`thickness_from_fft`, many fringes), the linear regression of the extrema's orders
@@ -58,14 +58,10 @@ n/λ (`thickness_from_fft`, many fringes), the linear regression of the extrema'
 branch (`thickness_from_scheludko`, few fringes), each on the spectrum normalised to its
 maximum and, for the extrema methods, smoothed by optifik's Savitzky–Golay filter.
 
-Example (the scenes are deterministic; the bare terrace is exactly 0 nm):
-    >>> from thinfilm_jax.studies.photo_study import oxide_thickness, soap_thickness
-    >>> d, pads = oxide_thickness(96)
-    >>> float(d.min()), float(d.max()) <= 900.0, [t for _, t in pads]
-    (0.0, True, [0.0, 120.0, 210.0, 330.0, 520.0, 760.0])
-    >>> h = soap_thickness(96)
-    >>> round(float(h.min())), round(float(h.max()))
-    (80, 1400)
+Example (the study's cases; the scenes and their rendering: `studies.photo_scenes`):
+    >>> from thinfilm_jax.studies.photo_study import cases
+    >>> [c.key for c in cases(96)][:5]
+    ['a', 'a-smooth', 'c-nikon', 'c-sigma-known', 'c-sigma']
 """
 
 from __future__ import annotations
@@ -83,24 +79,21 @@ import jax
 import numpy as np
 
 from ..core.film import Film
-from ..core.stack import Stack
-from ..fit.film_fit import fit_spectrum
-from ..fit.options import FitOptions
 from ..fit.photo import fit_photo
 from ..optics.materials import refractive_index
-from ..optics.stack import stack_reflectance
 from ._timing import environment, fmt, jsonable, write_report
+from .photo_scenes import (FULL_WELL_E, OXIDE_RANGE, READ_NOISE_E, SOAP_RANGE, SWIRLS, TERRACES,
+                           THICKNESS_STEP_NM, apply_table, camera_table, encode_srgb8,
+                           oxide_thickness, read_codes, reflectance_table, sensor,
+                           soap_thickness, srgb_table, templates, write_image, xyz_table,
+                           xyz_to_srgb)
+from .photo_spectra import spectra_study
 
 NIKON, SIGMA = "Nikon 5100 (NPL)", "Sigma SDMerill (NPL)"
-FULL_WELL_E = 20_000.0  # electrons at full scale (1.0)
-READ_NOISE_E = 5.0  # electrons rms
 JPEG_QUALITY = 90
-THICKNESS_STEP_NM = 0.1  # the rendering's thickness grid (1 nm in wavelength)
 RIGHT_ORDER_NM = 15.0  # |error| below this: the right fringe order
-#: the oxide terraces (nm); PADS index the four of them given as references in case (c)
-TERRACES = (0.0, 120.0, 210.0, 330.0, 520.0, 760.0)
+#: the four oxide terraces (`photo_scenes.TERRACES`) given as references in case (c)
 PADS = (0, 1, 3, 4)
-SOAP_RANGE, OXIDE_RANGE = (80.0, 1400.0), (0.0, 900.0)
 #: the fits' thickness_range: what a scientist would know of each sample
 FIT_RANGE = {"soap": (0.0, 1600.0), "oxide": (0.0, 1000.0)}
 #: truth: exposure of each photograph and, for the sRGB camera, its white-balance error
@@ -108,8 +101,6 @@ EXPOSURE = {"oxide": 1.6, "soap_camera": 9.0, "soap_srgb": 7.0}
 SRGB_WB = (1.08, 1.0, 0.93)
 SOAP_LIGHT = "D50"  # the soap film is photographed under D50, the oxide under D65
 SMOOTHNESS_NM_AT_512 = 12.0  # τ of the neighbour prior at 512 px (scaled with 512/size)
-#: (cx, cy, radius, turn in radians) of the soap film's swirls (unit square, y down)
-SWIRLS = ((0.30, 0.38, 0.13, 2.6), (0.70, 0.55, 0.16, -3.2), (0.45, 0.82, 0.11, 2.2))
 _PNG_METADATA = {"Software": None}
 
 
@@ -135,157 +126,6 @@ class PhotoConfig(NamedTuple):
 def _log(msg: str, verbose: bool):
     if verbose:
         print(f"[photo] {msg}", file=sys.stderr, flush=True)
-
-
-# ----------------------------------------------------------------------------- scenes
-def _unit_grid(n: int):
-    y, x = (np.mgrid[0:n, 0:n] + 0.5) / n
-    return x, y
-
-
-def soap_thickness(n: int, lo: float = SOAP_RANGE[0], hi: float = SOAP_RANGE[1]) -> np.ndarray:
-    """(n, n) nm: a vertical soap film draining as h ∝ √(depth + 0.03) (the offset: the
-    top's meniscus), its coordinates turned by `SWIRLS` (a turn decaying as a Gaussian of
-    the distance to each centre), scaled to [lo, hi]."""
-    x, y = _unit_grid(n)
-    for cx, cy, r, turn in SWIRLS:
-        dx, dy = x - cx, y - cy
-        a = turn * np.exp(-(dx * dx + dy * dy) / (r * r))
-        c, s = np.cos(a), np.sin(a)
-        x, y = cx + c * dx - s * dy, cy + s * dx + c * dy
-    f = np.sqrt(np.clip(y, 0.0, 1.0) + 0.03)
-    return lo + (hi - lo) * (f - f.min()) / (f.max() - f.min())
-
-
-def oxide_thickness(n: int):
-    """((n, n) nm, pads): SiO₂ on Si, top 30 %: the `TERRACES` (uniform), next 30 %: a bevel
-    0 → 900 nm across, bottom: a deposited dome 100 + 780·exp(−r²/(2·0.22²)) with a ±4 nm
-    ripple. `pads`: [(mask (n, n) bool, thickness)] per terrace, two pixels inside its
-    edges (the bare terrace, d = 0, is the bare-substrate reference)."""
-    x, y = _unit_grid(n)
-    k = np.minimum((x * len(TERRACES)).astype(int), len(TERRACES) - 1)
-    dome = 100.0 + 780.0 * np.exp(-((x - 0.5) ** 2 + (y - 0.8) ** 2) / (2 * 0.22**2))
-    dome = dome + 4.0 * np.sin(2 * np.pi * 5 * x) * np.sin(2 * np.pi * 3 * y)
-    d = np.where(y < 0.3, np.asarray(TERRACES)[k], np.where(y < 0.6, 900.0 * x, dome))
-    m = 2.0 / n
-    pads = []
-    for i, t in enumerate(TERRACES):
-        lo, hi = i / len(TERRACES), (i + 1) / len(TERRACES)
-        pads.append(((y > m) & (y < 0.3 - m) & (x > lo + m) & (x < hi - m), float(t)))
-    return d, pads
-
-
-def templates():
-    """The scenes' materials (`Film`: the unknown thickness is the film's)."""
-    return {"soap": Film(0.0, refractive_index("water"), 1.0),
-            "oxide": Film(0.0, refractive_index("SiO2"), refractive_index("Si"))}
-
-
-# ----------------------------------------------------------------------------- rendering
-def reflectance_table(template: Film, d_max: float, lam_lo: float, lam_hi: float):
-    """(d (G,), λ (L,), R (G, L)): the exact normal-incidence reflectance on a thickness
-    grid of `THICKNESS_STEP_NM` up to d_max and on λ = lam_lo … lam_hi at 1 nm."""
-    d = np.arange(0.0, d_max + THICKNESS_STEP_NM / 2, THICKNESS_STEP_NM)
-    lam = np.arange(lam_lo, lam_hi + 0.5, 1.0)
-    stack = Stack([0.0], (template.eta_film,), template.eta_base, template.eta_outer)
-    rows = []
-    for s in range(0, d.size, 4096):
-        st = stack._replace(thickness=d[s:s + 4096, None, None])
-        rows.append(np.asarray(stack_reflectance(st, 1.0, lam[None, :])))
-    return d, lam, np.concatenate(rows)
-
-
-def camera_table(r, lam, camera: str, illuminant: str):
-    """(raw RGB (G, 3), white (3,)): colour-science's integration of R against a camera's
-    sensitivities under a CIE illuminant at 1 nm on λ (the camera's range), normalised so
-    that a white reflector reads 1 in green (raw: not white-balanced)."""
-    import colour
-
-    shape = colour.SpectralShape(float(lam[0]), float(lam[-1]), 1.0)
-    kw = dict(cmfs=colour.MSDS_CAMERA_SENSITIVITIES[camera],
-              illuminant=colour.SDS_ILLUMINANTS[illuminant], method="Integration",
-              shape=shape)
-    with colour.utilities.suppress_warnings(colour_runtime_warnings=True):  # "Aligning ..."
-        rgb = np.asarray(colour.msds_to_XYZ(r, **kw))
-        white = np.asarray(colour.msds_to_XYZ(np.ones((1, lam.size)), **kw))[0]
-    return rgb / white[1], white / white[1]
-
-
-def xyz_table(r, lam, illuminant: str):
-    """(XYZ (G, 3), white xy (2,)): CIE 1931 2° tristimulus values of reflectances R under
-    the light by colour-science's integration at 1 nm, Y of the white reflector = 1."""
-    import colour
-
-    kw = dict(cmfs=colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"],
-              illuminant=colour.SDS_ILLUMINANTS[illuminant], method="Integration",
-              shape=colour.SpectralShape(float(lam[0]), float(lam[-1]), 1.0))
-    with colour.utilities.suppress_warnings(colour_runtime_warnings=True):  # "Aligning ..."
-        xyz = np.asarray(colour.msds_to_XYZ(r, **kw)) / 100.0
-        white = np.asarray(colour.msds_to_XYZ(np.ones((1, lam.size)), **kw))[0] / 100.0
-    return xyz, np.asarray(colour.XYZ_to_xy(white))
-
-
-def xyz_to_srgb(xyz, white_xy):
-    """Linear sRGB of XYZ under a light of white `white_xy`: Bradford to D65 and
-    ``colour.XYZ_to_RGB(..., "sRGB")``; not clipped (out-of-gamut values are < 0)."""
-    import colour
-
-    return np.asarray(colour.XYZ_to_RGB(xyz, "sRGB", illuminant=white_xy,
-                                        chromatic_adaptation_transform="Bradford"))
-
-
-def srgb_table(r, lam, illuminant: str):
-    """Linear sRGB (G, 3) of reflectances R under the light (`xyz_table`, `xyz_to_srgb`)."""
-    return xyz_to_srgb(*xyz_table(r, lam, illuminant))
-
-
-def apply_table(d_grid, table, dmap):
-    """The table's colours at the thickness map (linear interpolation): (H, W, 3)."""
-    return np.stack([np.interp(dmap, d_grid, table[:, c]) for c in range(3)], axis=-1)
-
-
-def sensor(v, rng):
-    """Photon noise (variance = signal, `FULL_WELL_E` electrons at 1.0) and read noise
-    (`READ_NOISE_E`) around v, then the clip to [0, 1]. An out-of-gamut v < 0 (an sRGB
-    camera's matrix applied to raw readings) keeps its sign through the noise, so that it is
-    clipped to black as a camera clips it."""
-    e = np.maximum(v, 0.0) * FULL_WELL_E
-    noise = rng.standard_normal(v.shape) * np.sqrt(e + READ_NOISE_E**2) / FULL_WELL_E
-    return np.clip(v + noise, 0.0, 1.0)
-
-
-def encode_srgb8(v):
-    """uint8 code values of linear values v ∈ [0, 1] (IEC 61966-2-1 by colour-science)."""
-    import colour
-
-    enc = np.asarray(colour.cctf_encoding(np.clip(v, 0.0, 1.0), function="sRGB"))
-    return np.round(enc * 255.0).astype(np.uint8)
-
-
-def write_image(path, codes, quality: int | None = None) -> Path:
-    """Write uint8/uint16 (H, W, 3) codes with OpenImageIO (JPEG at `quality`)."""
-    import OpenImageIO as oiio
-
-    h, w, _ = codes.shape
-    fmt_ = oiio.UINT8 if codes.dtype == np.uint8 else oiio.UINT16
-    spec = oiio.ImageSpec(w, h, 3, fmt_)
-    if quality is not None:
-        spec.attribute("Compression", f"jpeg:{quality}")
-    out = oiio.ImageOutput.create(str(path))
-    if out is None or not out.open(str(path), spec):
-        raise OSError(f"cannot write {path}: {oiio.geterror()}")
-    out.write_image(np.ascontiguousarray(codes))
-    out.close()
-    return Path(path)
-
-
-def read_codes(path) -> np.ndarray:
-    """The file's code values as stored (OpenImageIO)."""
-    import OpenImageIO as oiio
-
-    buf = oiio.ImageBuf(str(path))
-    fmt_ = oiio.UINT8 if str(buf.spec().format) == "uint8" else oiio.UINT16
-    return np.asarray(buf.get_pixels(fmt_))
 
 
 class CameraPhoto(NamedTuple):
@@ -540,139 +380,6 @@ def timing_1mp(cfg: PhotoConfig, scenes: dict, verbose: bool = True) -> dict | N
                      np.zeros((cfg.timing_size,) * 2, bool)))
     _log(f"1 MP: {seconds:.1f} s, {out['pixels_per_s']:.0f} px/s", verbose)
     return out
-
-
-# ----------------------------------------------------------------------------- spectra
-#: optifik's documented settings (its notebooks "Choice of method", "FFT", "Peak fitting",
-#: "Scheludko renormalisation"): extrema found on the Savitzky–Golay-smoothed spectrum with a
-#: prominence of 0.02 and a distance of 10 samples; more than 15 → FFT (zero-padding × 8),
-#: 5–15 → min-max (linear regression), at most 4 → Scheludko (order 0, with the void
-#: spectrum, when a single maximum is all there is)
-OPTIFIK_PROMINENCE, OPTIFIK_DISTANCE, OPTIFIK_PADDING = 0.02, 10, 8
-
-
-def _optifik(lam, obs, n_lam):
-    """optifik on one spectrum (module docstring): {method: (d or NaN, seconds)} for its
-    three estimators and for its documented choice among them ("rule", with "rule_method");
-    a refusal is NaN (its message under "<method>_error")."""
-    from optifik.analysis import finds_peak, smooth_intensities
-    from optifik.fft import thickness_from_fft
-    from optifik.minmax import thickness_from_minmax
-    from optifik.scheludko import get_default_start_stop_wavelengths, thickness_from_scheludko
-
-    kw = dict(min_peak_prominence=OPTIFIK_PROMINENCE)
-    out = {}
-
-    def fft(s):
-        return thickness_from_fft(lam, s, refractive_index=n_lam,
-                                  N_padding=OPTIFIK_PADDING).thickness
-
-    def minmax(s):
-        return thickness_from_minmax(lam, s, refractive_index=n_lam,
-                                     min_peak_distance=OPTIFIK_DISTANCE, **kw).thickness
-
-    def scheludko(s):
-        start, stop = get_default_start_stop_wavelengths(lam, s, n_lam, **kw)
-        return thickness_from_scheludko(lam, s, n_lam, wavelength_start=start,
-                                        wavelength_stop=stop).thickness
-
-    def scheludko0(s):  # a free film's void spectrum is dark: zeros
-        return thickness_from_scheludko(lam, s, n_lam, interference_order=0,
-                                        intensities_void=np.zeros_like(s)).thickness
-
-    def rule(s):
-        lo, hi = finds_peak(lam, s, min_peak_distance=OPTIFIK_DISTANCE, **kw)
-        k = len(lo) + len(hi)
-        if k > 15:
-            return "fft", fft(s)
-        if k >= 5:
-            return "minmax", minmax(s)
-        if len(lo) == 0 and len(hi) == 1:
-            return "scheludko order 0", scheludko0(s)
-        return "scheludko", scheludko(s)
-
-    def timed(name, fn):
-        t0 = time.perf_counter()
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                s = smooth_intensities(obs / np.max(obs))  # inside the timing: its own step
-                d = fn(s)
-                if name == "rule":
-                    out["rule_method"], d = d
-                d = float(d)
-        except (RuntimeError, ValueError, TypeError) as e:  # optifik's own refusals
-            d = float("nan")
-            out[name + "_error"] = str(e)
-        out[name] = (d, time.perf_counter() - t0)
-
-    for name, fn in (("fft", fft), ("minmax", minmax), ("scheludko", scheludko),
-                     ("rule", rule)):
-        timed(name, fn)
-    return out
-
-
-def spectra_study(cfg: PhotoConfig, verbose: bool = True) -> dict:
-    """`fit_spectrum` against optifik on soap-film spectra (module docstring)."""
-    water = refractive_index("water")
-    lam = np.arange(400.0, 800.5, 1.0)
-    n_lam = np.asarray(water(lam)).real
-    stack = Stack([0.0], (water,), 1.0)
-    opts = FitOptions(bounds={"thickness": (0.0, 6000.0)})
-    initial = Film(1000.0, water, 1.0)
-    rng = np.random.default_rng(7)
-    variants = [(f"σ = {s:g}", s, 0.0) for s in cfg.spectra_noise]
-    variants.append((f"σ = {cfg.spectra_noise[0]:g}, lamp tilt ±5 %",
-                     cfg.spectra_noise[0], 0.05))
-    rows, compile_s = [], None
-    for d in cfg.spectra_thickness:
-        r_true = np.asarray(stack_reflectance(stack._replace(thickness=np.array([d])), 1.0,
-                                              lam))
-        for label, sigma, tilt in variants:
-            res = {"fit_spectrum": [], "fft": [], "minmax": [], "scheludko": [], "rule": []}
-            times = {k: [] for k in res}
-            errors, chosen, flagged = {}, [], 0
-            for _ in range(cfg.spectra_repeats):
-                lamp = 1.0 + tilt * (lam - 600.0) / 200.0
-                obs = r_true * lamp + sigma * rng.standard_normal(lam.size)
-                t0 = time.perf_counter()
-                fit = fit_spectrum(obs, lam, 1.0, initial=initial, options=opts)
-                dt = float(jax.block_until_ready(fit.film.thickness))
-                t = time.perf_counter() - t0
-                if compile_s is None:  # the first call compiles: time it again
-                    t0 = time.perf_counter()
-                    jax.block_until_ready(fit_spectrum(obs, lam, 1.0, initial=initial,
-                                                       options=opts).film.thickness)
-                    compile_s, t = t - (time.perf_counter() - t0), time.perf_counter() - t0
-                res["fit_spectrum"].append(dt - d)
-                times["fit_spectrum"].append(t)
-                flagged += bool(fit.ambiguous)
-                for k, v in _optifik(lam, obs, n_lam).items():
-                    if k.endswith("_error"):
-                        errors[k] = v
-                    elif k == "rule_method":
-                        chosen.append(v)
-                    else:
-                        res[k].append(v[0] - d)
-                        times[k].append(v[1])
-            row = {"thickness_nm": d, "variant": label, "sigma": sigma, "tilt": tilt,
-                   "orders": float(2 * n_lam[0] * d / lam[0] - 2 * n_lam[-1] * d / lam[-1])}
-            for k in res:
-                e = np.abs(res[k])
-                row[k] = {"median_abs_nm": float(np.nanmedian(e)) if np.isfinite(e).any()
-                          else None, "max_abs_nm": float(np.nanmax(e))
-                          if np.isfinite(e).any() else None,
-                          "failed": int(np.sum(~np.isfinite(e))),
-                          "seconds": float(np.median(times[k]))}
-            row["optifik_errors"] = errors
-            row["rule_methods"] = sorted(set(chosen))
-            row["fit_spectrum"]["ambiguous"] = flagged
-            rows.append(row)
-        _log(f"spectra d = {d:g} nm: fit_spectrum "
-             f"{fmt(rows[-len(variants)]['fit_spectrum']['median_abs_nm'], '.2f')} nm", verbose)
-    return {"wavelength_nm": [float(lam[0]), float(lam[-1]), 1.0],
-            "repeats": cfg.spectra_repeats, "fit_spectrum_compile_s": compile_s,
-            "fit_spectrum_box_nm": [0.0, 6000.0], "rows": rows}
 
 
 # ----------------------------------------------------------------------------- report

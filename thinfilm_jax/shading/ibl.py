@@ -447,8 +447,8 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
     a = lookup_albedo(pref, co, safe_sqrt(alpha))
-    rad, shift = bin_radiance_parts(pref, table, normal, view, co, alpha)  # (K, ..., 3)
     cb, sb = lookup_bins(table, co, alpha)
+    light = bin_radiance_parts(pref, table, normal, view, co, alpha, sb)  # bins first
     obs = cross_band_name(observer) if cross_band else observer
     # Σ_c R_jc P_c: the cross-band table read per light channel in place (`lut.read_parts(
     # channel=...)`); three strided copies (`split_by_light`) made in every chunk cost 8 %
@@ -456,8 +456,7 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     bands = functools.partial(bin_bands, observer=obs, terms=terms, shat=shat, lut=lut,
                               arithmetic=arithmetic)
 
-    def under_light(film, c, s, read):  # the bin's film × its radiance P_k (..., 3)
-        light = read + shift
+    def under_light(film, c, s, light):  # the bin's film × its radiance P_k (..., 3)
         if per_light:
             return bands(film, c, s, light)
         r = bands(film, c, s)
@@ -465,5 +464,5 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
             return jnp.sum(r.reshape(r.shape[:-1] + (3, 3)) * light[..., None, :], axis=-1)
         return r * light
 
-    out = scan_bins(film, cb, sb, under_light, extra=rad)  # Σ_k (..., J)
+    out = scan_bins(film, cb, sb, under_light, extra=light)  # Σ_k (..., J)
     return jnp.where(up[..., None], a[..., None] * out * (1.0 / cb.shape[-1]), 0.0)

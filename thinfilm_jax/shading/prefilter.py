@@ -52,7 +52,7 @@ from ..core import _validate as V
 from .envmap import (EnvMap, bilinear_taps, downsample, load_envmap, luminance_weights,
                      read_taps, texel_centers, texel_solid_angles)
 from ..optics.fresnel import complex_dtype, safe_sqrt
-from ..realtime.improved import BinLight, _bilinear, lookup_bins, lookup_lobe, lookup_reads
+from ..realtime.improved import BinLight, _bilinear, lookup_lobe, lookup_reads
 from ..spectral.lut import ShatLUT, build_shat_lut
 from ..brdf.microfacet import albedo, normal_distribution, smith_g2
 from .sources import Sources, extract_sources, with_film_tables
@@ -334,10 +334,10 @@ def _incidence_cos(x):
     return safe_sqrt(jnp.clip((1.0 + x) * 0.5, 0.0, 1.0))
 
 
-def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha):
-    r"""The light of the improved model's K bins (docs/improved.md): (`improved.BinLight`
+def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha, spread):
+    r"""The light of the improved model's K bins (docs/improved.md): an `improved.BinLight`
     (radiance (K, ..., 3) and cosine shifts (K, ...), bins first: the layout
-    `improved.scan_bins` steps through), a shift (..., 3) of every bin's radiance, 0).
+    `improved.scan_bins` steps through).
 
     Read k is the prefiltered radiance P_k and luminance-weighted mean direction μ_k (the
     first three moment channels, K §3.2) at the tabulated direction d_k and level α_k
@@ -356,7 +356,7 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     17 levels, random directions and levels: the sampled kernel of narrow levels and the
     bilinear read), so a constant environment gives Δc = 0, the uniform-light model.
     Per-channel moments are combined weighted by each channel's luminance. cos_o = ⟨n, ω_o⟩
-    > 0."""
+    > 0; `spread`: the bins' s_k (..., K) (`improved.lookup_bins`, which the caller reads)."""
     dirn, sqa = lookup_reads(table, normal, view, cos_o, alpha)  # (..., K, 3), (..., K)
     dirn, sqa = jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa, -1, 0)
     rad, mean = _read_levels(pref, (pref.radiance, pref.moments[..., :3]), dirn, sqa)
@@ -378,9 +378,9 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     x_uniform = m1 * dot(view, dirn)
     dx = dot(view, mean) - x_uniform  # what the light moves ⟨ω_o, E ω_i⟩ by
     dx = jnp.sign(dx) * jnp.maximum(jnp.abs(dx) - MOMENT_RESOLUTION, 0.0)
-    lim = 3.0**0.5 * jnp.moveaxis(lookup_bins(table, cos_o, alpha)[1], -1, 0)
+    lim = 3.0**0.5 * jnp.moveaxis(spread, -1, 0)
     shift = jnp.clip(_incidence_cos(x_uniform + dx) - _incidence_cos(x_uniform), -lim, lim)
-    return BinLight(rad, shift), jnp.zeros_like(rad[0])
+    return BinLight(rad, shift)
 
 
 def moments_to_mean_cov(m):

@@ -242,7 +242,7 @@ def run_kernel_bench(out="figures", *, points: int = 65536, repeats: int = 7,
     if baseline is not None:
         versions["old"] = programs(load_package(baseline), pts, pref_np, envmap)
     peak_fn, peak_args, peak_flops = peak_program()
-    rows, timed = [], []
+    rows, timed = [], {}
     for version, progs in versions.items():
         for name, (fn, args) in progs.items():
             t0 = time.perf_counter()
@@ -252,16 +252,14 @@ def run_kernel_bench(out="figures", *, points: int = 65536, repeats: int = 7,
             row = {"kernel": name, "version": version, **cost, "first_call_s": first,
                    "lower_compile_s": lowered_s}
             rows.append(row)
-            timed.append((row, fn, args))
+            timed[len(rows) - 1] = (fn, args)
             log(f"  {version} {name}: {cost['bytes_accessed']:.0f} B/point", verbose)
-    peak_times = []
     _timed(peak_fn, peak_args)
-    for _ in range(repeats):  # interleaved: every program once per round, the peak loop too
-        peak_times.append(_timed(peak_fn, peak_args))
-        for row, fn, args in timed:
-            row.setdefault("times_s", []).append(_timed(fn, args))
-    peak = peak_flops / min(peak_times)
-    for row in rows:
+    # interleaved: every program once per round, the peak loop too
+    times, _ = time_interleaved({"peak": (peak_fn, peak_args), **timed}, repeats)
+    peak = peak_flops / min(times["peak"])
+    for i, row in enumerate(rows):
+        row["times_s"] = times[i]
         t = min(row["times_s"])
         row["ns_per_point"] = t / points * 1e9
         row["ns_per_point_median"] = float(np.median(row["times_s"])) / points * 1e9
@@ -426,12 +424,6 @@ RATIOS = (("filtered / ideal", "envmap filtered", "envmap ideal"),
 RATIO_TARGET = 1.5
 
 
-def _load() -> list | None:
-    import os
-
-    return list(os.getloadavg()) if hasattr(os, "getloadavg") else None
-
-
 def size_ratios(rows: list, key: str = "ns_per_point") -> list:
     """The `RATIOS` of every (points, batch_size) group of `rows`, from `key`."""
     groups: dict = {}
@@ -464,7 +456,7 @@ def run_size_bench(out="figures", *, sizes=(65536, 2**20, FRAME_1440P), batch_si
     env = environment()
     pref = prefilter_envmap("venice_sunset").astype(F32)
     pref_np = (*pref[:4], tuple(pref.lut))
-    rows, timed = [], []
+    rows, timed = [], {}
     for n in sizes:
         pts = shading_points(int(n))
         for b in batch_sizes:
@@ -478,18 +470,14 @@ def run_size_bench(out="figures", *, sizes=(65536, 2**20, FRAME_1440P), batch_si
                 _timed(compiled, args)  # first run: allocations, page faults
                 row = {"points": int(n), "batch_size": b, "kernel": name,
                        "bytes_accessed": cost["bytes_accessed"], "fusions": cost["fusions"],
-                       "loops": cost["loops"], "compile_s": compile_s, "times_s": []}
+                       "loops": cost["loops"], "compile_s": compile_s}
                 rows.append(row)
-                timed.append((row, compiled, args))
+                timed[len(rows) - 1] = (compiled, args)
                 log(f"  {n} points, batch {b}, {name}: compiled in {compile_s:.1f} s", verbose)
-    loads = []
-    for i in range(repeats):  # interleaved: every program once per round
-        loads.append(_load())
-        for row, fn, args in timed:
-            row["times_s"].append(_timed(fn, args))
-        log(f"  round {i + 1}/{repeats}, load {loads[-1]}", verbose)
-    loads.append(_load())
-    for row in rows:
+    times, loads = time_interleaved(timed, repeats, lambda i, load: log(
+        f"  round {i + 1}/{repeats}, load {load}", verbose))
+    for i, row in enumerate(rows):
+        row["times_s"] = times[i]
         row["ns_per_point"] = min(row["times_s"]) / row["points"] * 1e9
         row["ns_per_point_median"] = float(np.median(row["times_s"])) / row["points"] * 1e9
         row["median_over_min"] = row["ns_per_point_median"] / row["ns_per_point"]

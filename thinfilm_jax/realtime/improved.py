@@ -409,7 +409,7 @@ def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
 @functools.cache
 def _bin_table_cached(shape, bins, quadrature, ndf, x64):
     """`_bin_table_host` once per process, and once per cache folder when JAX's persistent
-    compilation cache is on (`core.compilation_cache.cached_host_tables`: ≈ 10 s saved in
+    compilation cache is on (`core.compilation_cache.cached_host_tables`: ≈ 15 s saved in
     every later process, e.g. each notebook kernel and CLI run)."""
     from ..brdf import microfacet
 

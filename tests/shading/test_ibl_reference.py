@@ -33,24 +33,26 @@ def _run(env, alpha, n, v, **kw):
                           arithmetic="complex", one_film=True, return_estimate=True, **kw)
 
 
-@pytest.mark.parametrize("alpha", [0.05, 0.25, 0.6])
+@pytest.mark.parametrize("alpha", [0.05, 0.1, 0.15, 0.25, 0.6])
 def test_adaptive_matches_exhaustive(alpha):
     """Same points, the shipped 128 × 256 sunset map: the adaptive rule (a second-order
     Taylor rule per 4 × 4-texel block with the light's exact moments, the texel interpolant
-    in the 128 blocks it scores worst, s × s Gauss nodes in the 64 s² texels it scores worst
-    among theirs) agrees with every texel at s × s nodes to ≤ 1.5e-4 of each band's maximum
-    (measured 1.0e-5, 8.1e-5, 9.9e-5 at α = 0.05, 0.25, 0.6 on these 6 points, two of them
-    at 85° from the normal; ≤ 1.3e-4 on 37 sphere points of each shipped map,
-    `refine_counts`); the SPEC's bound is 1e-3. Without the sub-texel level the grazing
-    points miss by 9e-3 at α = 0.05, without the texel rule by 0.42. The estimate of the
-    neglected part is finite and ≥ 0 (5e-5 to 0.1 of the band maximum here)."""
+    in the K blocks it scores worst, s × s Gauss nodes in the K₃ texels it scores worst
+    among theirs, `refine_counts`) agrees with every texel at s × s nodes to ≤ 5e-4 of each
+    band's maximum (measured 1.9e-6, 4.3e-6, 6.6e-5, 6.3e-5, 2.6e-4 at α = 0.05, 0.1, 0.15,
+    0.25, 0.6 on these 6 points, two of them at 85° from the normal; ≤ 5.0e-4 on 58 points
+    of each shipped map at ten α from 0.05 to 0.6); the SPEC's bound is 1e-3. The former
+    fixed counts (K = 256, K₃ = 64 s²) miss at α = 0.1 (2.5e-3): the lobe spans more texels
+    than 256. Without the sub-texel level the grazing points miss by 9e-3 at α = 0.05,
+    without the texel rule by 0.42. The estimate of the neglected part is finite and ≥ 0
+    (5e-5 to 0.17 of the band maximum here)."""
     env = load_envmap("venice_sunset")
     n, v = _points()
     old, _ = _run(env, alpha, n, v, exhaustive=True)
     new, est = _run(env, alpha, n, v)
     old, new, est = map(np.asarray, (old, new, est))
     scale = np.abs(old).max(axis=0)
-    assert np.all(np.abs(new - old).max(axis=0) <= 1.5e-4 * scale), np.abs(new - old).max(0) / scale
+    assert np.all(np.abs(new - old).max(axis=0) <= 5e-4 * scale), np.abs(new - old).max(0) / scale
     assert np.all(np.isfinite(est)) and np.all(est >= 0)
 
 

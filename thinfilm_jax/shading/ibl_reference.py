@@ -18,7 +18,7 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
    piecewise-constant map and third order in (block size / lobe width). Summed by parts,
    the whole map costs one contraction Σ_B g_B · L_B with per-map weights L_B
    (`block_light`), one node per block.
-2. *Texel rule.* The K = 256 blocks with the largest estimated error (`refine_counts`),
+2. *Texel rule.* The K blocks (64 to 256, `refine_counts`) with the largest estimated error,
    score_B = ρ̃⟨n,ω⟩ Σ_(t∈B) Ω_t Σ_k c_k,t · min(1, (Δ_B / ℓ_B)³),
    ℓ_B = 2⟨h,ω_B⟩ √(α² cos⁴θ_h + sin²θ_h cos²θ_h) (the local width of the GGX lobe mapped
    to ω_i: 2α at its peak, compressed by ⟨h,ω_i⟩ at grazing views; Δ_B the block's angular
@@ -31,7 +31,8 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
    `interpolant_light`): b² nodes per block, fourth order in (texel size / lobe width).
    The K blocks are found without a sort (bisection on the score: XLA's TopK on the CPU
    costs more than the block pass).
-3. *Sub-texel nodes.* Among those blocks' texels the K₃ = 64 s² with the largest score
+3. *Sub-texel nodes.* Among those blocks' texels the K₃ (256 to 1024 where s ≤ 4, else
+   64 s²; `refine_counts`: more where the lobe is narrower) with the largest score
    (the same score per texel; near the horizon the weight is the block's largest, since the
    interpolant spreads a lit node over the block) are integrated with s × s Gauss–Legendre
    nodes in (cos θ, φ), s = `auto_subdivisions` (the exhaustive rule's own nodes), and
@@ -45,11 +46,12 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
 
 With every block and texel refined (`refine=(T_B, T)`) the result is the exhaustive rule's
 to rounding (its nodes are the same; tests/shading/test_ibl_reference.py). With the default
-counts it is within 1.3e-4 of it (largest band error / band maximum at α = 0.05, 0.25, 0.6:
-37 sphere points on each shipped map, 6 random points with grazing views on the sunset map;
-`refine_counts`), at
+counts it is within 5.0e-4 of it (largest band error / band maximum, at most at α = 0.2 on
+forest_slope; 1.2e-4 at most at α ≤ 0.15; the SPEC's bound is 1e-3), measured at α = 0.05,
+0.08, 0.1, 0.12, 0.15, 0.2, 0.25, 0.3, 0.4, 0.6 on each shipped map: the 52 points of an
+8 px sphere and 6 random points, two of them at 85° from the normal (`refine_counts`), at
 H W / b² + K b² + K₃ s² node evaluations per point against the exhaustive rule's H W s²:
-7.2k against 131k at α = 0.25 (s = 2) and 22.5k against 524k at α = 0.05 (s = 4) on the
+4.1k against 131k at α = 0.25 (s = 2) and 22.5k against 524k at α = 0.05 (s = 4) on the
 shipped maps.
 
 The exhaustive rule (every texel with s × s nodes, the reference before this module) stays
@@ -57,9 +59,9 @@ reachable as `reference_radiance(..., exhaustive=True)`: tests/shading/test_ibl_
 compares the two and `thinfilm_jax.studies.ibl_bench` times both in one run.
 
 Points are shaded in `jax.lax.map` steps (the exhaustive rule: one point per step, its
-intermediates, H W s² × 9 doubles, near the cache; the adaptive rule: 4 points per step,
-`batch_size`, which amortises the per-operation cost of its small gathers, 1.3× faster than
-one); one film shared by every point builds its R_jk table once.
+intermediates, H W s² × 9 doubles, near the cache; the adaptive rule: 8 points per step
+where a point has at most 8192 nodes, else 4, `batch_size`, which amortises the
+per-operation cost of its small gathers: 1.3× faster than one); one film shared by every point builds its R_jk table once.
 
 Large maps. The cost per point grows with H·W (the block rule's H W / b² nodes, the
 exhaustive rule's H W s²). `reference_radiance` (and so `envmap_radiance`)
@@ -250,10 +252,13 @@ def _per_row(r, light, cross):
 
 
 # ----------------------------------------------------------------------------- adaptive
-def _select(score, k: int, iterations: int = 32):
+def _select(score, k: int, iterations: int = 20):
     """Indices (k,) of blocks with the largest scores, padded with len(score): those above
     a threshold found by bisection on log(score) so that at most k pass (a sort-free top-k:
-    XLA's TopK on the CPU sorts, several times slower than the whole coarse pass)."""
+    XLA's TopK on the CPU sorts, several times slower than the whole coarse pass). The
+    bracket [e⁻⁴⁰, e] × the largest score in 20 halvings: 4e-5 in log(score), so at most
+    the scores that close to the threshold are left out (and none above e⁻⁴⁰ of the largest
+    is refined for lack of range; such blocks hold nothing a band would show)."""
     top = jnp.max(score)
     lt = jnp.log(jnp.where(top > 0, top, 1.0))
 
@@ -263,7 +268,7 @@ def _select(score, k: int, iterations: int = 32):
         many = jnp.sum(score > jnp.exp(mid)) > k
         return jnp.where(many, mid, lo), jnp.where(many, hi, mid)
 
-    _, hi = jax.lax.fori_loop(0, iterations, body, (lt - 80.0, lt + 1.0))
+    _, hi = jax.lax.fori_loop(0, iterations, body, (lt - 40.0, lt + 1.0))
     mask = (score > jnp.exp(hi)) & (score > 0)
     pos = jax.lax.associative_scan(jnp.add, mask.astype(jnp.int32))
     return jnp.searchsorted(pos, jnp.arange(1, k + 1, dtype=pos.dtype), side="left")
@@ -399,21 +404,34 @@ def block_size(h: int, w: int) -> int:
     return next(b for b in (4, 2, 1) if h % b == 0 and w % (2 * b) == 0)
 
 
-def refine_counts(blocks: int, b: int, s: int) -> tuple[int, int]:
+def refine_counts(blocks: int, b: int, s: int, lobe_texels: float | None = None
+                  ) -> tuple[int, int]:
     """(K, K₃) of the adaptive rule: the blocks integrated again by the texel rule, and the
     texels among theirs (among all blocks where a block is one texel) integrated with s × s
-    sub-nodes, per point: K = 256, K₃ = 64 s² (at most all of them; no sub-texel level where
-    s = 1, since one node per texel is coarser than the texel rule). Measured against the
-    exhaustive rule (largest band error / band maximum) on 6 random points of the sunset map,
-    two at 85° from the normal: K₃ = 512, 1024, 2048 at α = 0.05 (s = 4) give 3.9e-3,
-    1.0e-5, 1.6e-5 (the grazing views' thin lobes need them); K₃ = 128, 256, 512 at
-    α = 0.25 (s = 2) give 5.8e-4, 8.1e-5, 1.4e-4 (not monotone: the texel rule's errors
-    partly cancel; these were measured with K = 128); K = 256 instead of 128 changes them by
-    less than 2×, and is kept for wide lobes under a small map."""
+    sub-nodes, per point. `lobe_texels` r = α_min / texel angle (π/H) is the narrowest
+    lobe's width in texels (None: the narrowest lobe of s's range, r = 8/s).
+
+    K₃ = max(64 s², 64 ⌈400 / r²⌉ clipped to [256, 1024]): as r falls the texels that the
+    texel rule resolves too coarsely grow in number (256 for r ≥ 10, α ≥ 0.25 on a 128-row
+    map; 1024 for r ≤ 5, α ≤ 0.12, where s ≤ 4). K = K₃ / 4 blocks in [64, 256] (the
+    texel level picks the best quarter of their texels); at most all of them; no sub-texel
+    level where s = 1, since one node per texel is coarser than the texel rule.
+
+    Measured against the exhaustive rule (largest band error / band maximum; the shipped
+    maps, the 52 points of an 8 px sphere and 6 random points, two at 85° from the normal):
+    with the former fixed K₃ = 64 s², K = 256 the s = 2 range erred up to 6.8e-3 at α = 0.1
+    and 2.8e-3 at α = 0.15 (forest_slope), over the SPEC's 1e-3 (the texel rule's lobe
+    spans more than 256 texels there); K₃ = 256, 512, 1024 give 6.8e-3, 5.0e-4, 7.2e-5 at
+    α = 0.1 and 1.7e-4, 8.9e-5, 4.4e-5 at α = 0.3. At α = 0.05 (s = 4) K₃ = 1024 needs
+    K = 256 blocks: with 64 the grazing views err 2.5e-3."""
     if s <= 1:
         return (0, 0) if b == 1 else (int(min(blocks, 256)), 0)
-    k = int(min(blocks, 256)) if b > 1 else 0
-    return k, int(min(k * b * b if b > 1 else blocks, 64 * s * s))
+    r = 8.0 / s if lobe_texels is None else max(float(lobe_texels), 1e-9)
+    k3 = max(64 * s * s, int(np.clip(64 * np.ceil(400.0 / r**2), 256, 1024)))
+    if b == 1:
+        return 0, int(min(blocks, k3))
+    k = int(min(blocks, np.clip(k3 // 4, 64, 256)))
+    return k, int(min(k * b * b, k3))
 
 
 def _peak_weight(terms, a, sin_r):
@@ -654,10 +672,13 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
         out = _exact_jit(film, alpha, normal, view, rad, nodes, cfg)
         return (out, jnp.zeros(alpha.shape, dtype)) if return_estimate else out
     b = block_size(*env.shape)
-    counts = (refine_counts(h * env.shape[1] // b**2, b, s) if refine is None
-              else tuple(int(x) for x in refine))
+    counts = (refine_counts(h * env.shape[1] // b**2, b, s, a_min * h / np.pi)
+              if refine is None else tuple(int(x) for x in refine))
     geo = _adaptive_geometry(rad, b, s)
-    chunk = int(batch_size or 4)  # points per lax.map step (vmapped): measured 1.3× over 1
+    # points per lax.map step (vmapped): 8 where a point has few nodes (27 against 30 ms for
+    # 4 at α = 0.25), 4 where it has many (79 against 93 ms for 8 at α = 0.05); 1.3× over 1
+    nodes = h * env.shape[1] // b**2 + counts[0] * b * b + counts[1] * s * s
+    chunk = int(batch_size or (8 if nodes <= 8192 else 4))
     cfg = (observer, s, int(n_cos), bool(cross_band), arithmetic, counts,
            one_film, max(1, min(chunk, max(n_pts, 1))))
     out, est = _adaptive_jit(film, alpha, normal, view, rad, geo, None, cfg)

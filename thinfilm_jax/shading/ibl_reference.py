@@ -47,9 +47,10 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
 With every block and texel refined (`refine=(T_B, T)`) the result is the exhaustive rule's
 to rounding (its nodes are the same; tests/shading/test_ibl_reference.py). With the default
 counts it is within 5.0e-4 of it (largest band error / band maximum, at most at α = 0.2 on
-forest_slope; 1.2e-4 at most at α ≤ 0.15; the SPEC's bound is 1e-3), measured at α = 0.05,
-0.08, 0.1, 0.12, 0.15, 0.2, 0.25, 0.3, 0.4, 0.6 on each shipped map: the 52 points of an
-8 px sphere and 6 random points, two of them at 85° from the normal (`refine_counts`), at
+forest_slope; 1.2e-4 at most at α ≤ 0.15; the SPEC's bound is 1e-3), measured at α = 0.03,
+0.05, 0.08, 0.1, 0.12, 0.15, 0.2, 0.25, 0.3, 0.4, 0.6, 1 on each shipped map: the 52 points
+of an 8 px sphere and 6 random points, two of them at 85° from the normal
+(`refine_counts`), at
 H W / b² + K b² + K₃ s² node evaluations per point against the exhaustive rule's H W s²:
 4.1k against 131k at α = 0.25 (s = 2) and 22.5k against 524k at α = 0.05 (s = 4) on the
 shipped maps.
@@ -413,9 +414,11 @@ def refine_counts(blocks: int, b: int, s: int, lobe_texels: float | None = None
 
     K₃ = max(64 s², 64 ⌈400 / r²⌉ clipped to [256, 1024]): as r falls the texels that the
     texel rule resolves too coarsely grow in number (256 for r ≥ 10, α ≥ 0.25 on a 128-row
-    map; 1024 for r ≤ 5, α ≤ 0.12, where s ≤ 4). K = K₃ / 4 blocks in [64, 256] (the
-    texel level picks the best quarter of their texels); at most all of them; no sub-texel
-    level where s = 1, since one node per texel is coarser than the texel rule.
+    map; 1024 for r ≤ 5, α ≤ 0.12, where s ≤ 4). K blocks in [64, 256]: at least K₃ / 4
+    (the texel level picks the best quarter of their texels) and half the blocks a wide lobe
+    spans, (2r/b)² / 2 (the block rule's small errors add up over them: 208 at α = 1); at
+    most all of them. No sub-texel level where s = 1, since one node per texel is coarser
+    than the texel rule.
 
     Measured against the exhaustive rule (largest band error / band maximum; the shipped
     maps, the 52 points of an 8 px sphere and 6 random points, two at 85° from the normal):
@@ -423,14 +426,15 @@ def refine_counts(blocks: int, b: int, s: int, lobe_texels: float | None = None
     and 2.8e-3 at α = 0.15 (forest_slope), over the SPEC's 1e-3 (the texel rule's lobe
     spans more than 256 texels there); K₃ = 256, 512, 1024 give 6.8e-3, 5.0e-4, 7.2e-5 at
     α = 0.1 and 1.7e-4, 8.9e-5, 4.4e-5 at α = 0.3. At α = 0.05 (s = 4) K₃ = 1024 needs
-    K = 256 blocks: with 64 the grazing views err 2.5e-3."""
+    K = 256 blocks: with 64 the grazing views err 2.5e-3. At α = 1, K = 64, 128, 256 give
+    8.4e-4, 3.3e-4, 1.8e-4 (α = 0.6: 3.9e-4, 1.7e-4, 8.2e-5)."""
     if s <= 1:
         return (0, 0) if b == 1 else (int(min(blocks, 256)), 0)
     r = 8.0 / s if lobe_texels is None else max(float(lobe_texels), 1e-9)
     k3 = max(64 * s * s, int(np.clip(64 * np.ceil(400.0 / r**2), 256, 1024)))
     if b == 1:
         return 0, int(min(blocks, k3))
-    k = int(min(blocks, np.clip(k3 // 4, 64, 256)))
+    k = int(min(blocks, np.clip(max(k3 // 4, int(np.ceil(2 * r * r / (b * b)))), 64, 256)))
     return k, int(min(k * b * b, k3))
 
 

@@ -18,7 +18,7 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
    piecewise-constant map and third order in (block size / lobe width). Summed by parts,
    the whole map costs one contraction Σ_B g_B · L_B with per-map weights L_B
    (`block_light`), one node per block.
-2. *Texel rule.* The K blocks (64 to 256, `refine_counts`) with the largest estimated error,
+2. *Texel rule.* The K = 256 blocks with the largest estimated error (`refine_counts`),
    score_B = ρ̃⟨n,ω⟩ Σ_(t∈B) Ω_t Σ_k c_k,t · min(1, (Δ_B / ℓ_B)³),
    ℓ_B = 2⟨h,ω_B⟩ √(α² cos⁴θ_h + sin²θ_h cos²θ_h) (the local width of the GGX lobe mapped
    to ω_i: 2α at its peak, compressed by ⟨h,ω_i⟩ at grazing views; Δ_B the block's angular
@@ -46,13 +46,13 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
 
 With every block and texel refined (`refine=(T_B, T)`) the result is the exhaustive rule's
 to rounding (its nodes are the same; tests/shading/test_ibl_reference.py). With the default
-counts it is within 5.0e-4 of it (largest band error / band maximum, at most at α = 0.2 on
-forest_slope; 1.2e-4 at most at α ≤ 0.15; the SPEC's bound is 1e-3), measured at α = 0.03,
+counts it is within 3.3e-4 of it (largest band error / band maximum, at most at α = 0.2 on
+forest_slope; 8e-5 at most at α ≤ 0.15; the SPEC's bound is 1e-3), measured at α = 0.03,
 0.05, 0.08, 0.1, 0.12, 0.15, 0.2, 0.25, 0.3, 0.4, 0.6, 1 on each shipped map: the 52 points
 of an 8 px sphere and 6 random points, two of them at 85° from the normal
 (`refine_counts`), at
 H W / b² + K b² + K₃ s² node evaluations per point against the exhaustive rule's H W s²:
-4.1k against 131k at α = 0.25 (s = 2) and 22.5k against 524k at α = 0.05 (s = 4) on the
+7.2k against 131k at α = 0.25 (s = 2) and 22.5k against 524k at α = 0.05 (s = 4) on the
 shipped maps.
 
 The exhaustive rule (every texel with s × s nodes, the reference before this module) stays
@@ -62,7 +62,8 @@ compares the two and `thinfilm_jax.studies.ibl_bench` times both in one run.
 Points are shaded in `jax.lax.map` steps (the exhaustive rule: one point per step, its
 intermediates, H W s² × 9 doubles, near the cache; the adaptive rule: 8 points per step
 where a point has at most 8192 nodes, else 4, `batch_size`, which amortises the
-per-operation cost of its small gathers: 1.3× faster than one); one film shared by every point builds its R_jk table once.
+per-operation cost of its small gathers: 1.3× faster than one); one film shared by every
+point builds its R_jk table once.
 
 Large maps. The cost per point grows with H·W (the block rule's H W / b² nodes, the
 exhaustive rule's H W s²). `reference_radiance` (and so `envmap_radiance`)
@@ -412,29 +413,28 @@ def refine_counts(blocks: int, b: int, s: int, lobe_texels: float | None = None
     sub-nodes, per point. `lobe_texels` r = α_min / texel angle (π/H) is the narrowest
     lobe's width in texels (None: the narrowest lobe of s's range, r = 8/s).
 
-    K₃ = max(64 s², 64 ⌈400 / r²⌉ clipped to [256, 1024]): as r falls the texels that the
-    texel rule resolves too coarsely grow in number (256 for r ≥ 10, α ≥ 0.25 on a 128-row
-    map; 1024 for r ≤ 5, α ≤ 0.12, where s ≤ 4). K blocks in [64, 256]: at least K₃ / 4
-    (the texel level picks the best quarter of their texels) and half the blocks a wide lobe
-    spans, (2r/b)² / 2 (the block rule's small errors add up over them: 208 at α = 1); at
-    most all of them. No sub-texel level where s = 1, since one node per texel is coarser
-    than the texel rule.
+    K = 256 blocks (at most all of them). K₃ = max(64 s², 64 ⌈400 / r²⌉ clipped to
+    [256, 1024]): as r falls the texels that the texel rule resolves too coarsely grow in
+    number (256 for r ≥ 10, α ≥ 0.25 on a 128-row map; 1024 for r ≤ 5, α ≤ 0.12, where
+    s ≤ 4). No sub-texel level where s = 1, since one node per texel is coarser than the
+    texel rule.
 
     Measured against the exhaustive rule (largest band error / band maximum; the shipped
     maps, the 52 points of an 8 px sphere and 6 random points, two at 85° from the normal):
-    with the former fixed K₃ = 64 s², K = 256 the s = 2 range erred up to 6.8e-3 at α = 0.1
-    and 2.8e-3 at α = 0.15 (forest_slope), over the SPEC's 1e-3 (the texel rule's lobe
-    spans more than 256 texels there); K₃ = 256, 512, 1024 give 6.8e-3, 5.0e-4, 7.2e-5 at
-    α = 0.1 and 1.7e-4, 8.9e-5, 4.4e-5 at α = 0.3. At α = 0.05 (s = 4) K₃ = 1024 needs
-    K = 256 blocks: with 64 the grazing views err 2.5e-3. At α = 1, K = 64, 128, 256 give
-    8.4e-4, 3.3e-4, 1.8e-4 (α = 0.6: 3.9e-4, 1.7e-4, 8.2e-5)."""
+    the former K₃ = 64 s² (256 wherever s = 2) erred up to 4.1e-3 at α = 0.1 and 1.3e-3 at
+    α = 0.15 (forest_slope), over the SPEC's 1e-3: the lobe spans more texels than the
+    texel rule resolves there; K₃ = 1024 gives 7.2e-5 at α = 0.1. K cannot fall for wide
+    lobes: a white map seen at 86° from the normal (the white furnace, against A(θ_o, α),
+    128 rows) errs 1.0e-3, 1.5e-3, 2.9e-3 at α = 0.25, 0.5, 1 with K = 64 and 4.2e-4,
+    5.6e-4, 6.1e-4 with K = 256: the block rule's small errors over a lobe that spans the
+    horizon add up."""
     if s <= 1:
         return (0, 0) if b == 1 else (int(min(blocks, 256)), 0)
     r = 8.0 / s if lobe_texels is None else max(float(lobe_texels), 1e-9)
     k3 = max(64 * s * s, int(np.clip(64 * np.ceil(400.0 / r**2), 256, 1024)))
     if b == 1:
         return 0, int(min(blocks, k3))
-    k = int(min(blocks, np.clip(max(k3 // 4, int(np.ceil(2 * r * r / (b * b)))), 64, 256)))
+    k = int(min(blocks, 256))
     return k, int(min(k * b * b, k3))
 
 
@@ -679,8 +679,8 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
     counts = (refine_counts(h * env.shape[1] // b**2, b, s, a_min * h / np.pi)
               if refine is None else tuple(int(x) for x in refine))
     geo = _adaptive_geometry(rad, b, s)
-    # points per lax.map step (vmapped): 8 where a point has few nodes (27 against 30 ms for
-    # 4 at α = 0.25), 4 where it has many (79 against 93 ms for 8 at α = 0.05); 1.3× over 1
+    # points per lax.map step (vmapped): 8 where a point has few nodes (44.6 against 48.5 ms
+    # for 4 at α = 0.25), 4 where it has many (79 against 93 ms for 8 at α = 0.05)
     nodes = h * env.shape[1] // b**2 + counts[0] * b * b + counts[1] * s * s
     chunk = int(batch_size or (8 if nodes <= 8192 else 4))
     cfg = (observer, s, int(n_cos), bool(cross_band), arithmetic, counts,

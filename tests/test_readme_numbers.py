@@ -812,7 +812,7 @@ SPECS = [
              r"split\)", ("kernel_bench.json",),
              _improved_cost_sentence),
     Sentence(r"α = 0.25 and 0.6 \((\S+)× and (\S+)×: (\S+) and (\S+) points/s against (\S+) and "
-             r"(\S+)\) and at\s+α = 0.05 \((\S+)×\)(?s:.*?)at α = 0.25: (\S+) points/s here",
+             r"(\S+)\), met at\s+α = 0.05 \((\S+)×\)(?s:.*?)at α = 0.25: (\S+) points/s here",
              ("reference_bench.json",), _reference_bench_sentence),
     Sentence(r"included, once warm: there `filtered` costs (\S+)× `ideal` and `improved` (\S+)× "
              r"`filtered`,(?s:.*?)`ideal` takes (\S+) ns a point there,\s+(\S+) ns jitted",

@@ -66,17 +66,9 @@ per-operation cost of its small gathers: 1.3× faster than one); one film shared
 point builds its R_jk table once.
 
 Grazing views. Near θ_o = 90° the lobe in ω_i is about 2α cos θ_o wide, while s sizes the
-nodes by α alone: where it is narrower than two node spacings π/(H s) neither texel rule
-converges (a near-mirror under a white map: 1.2e-2 at α = 0.05, θ_o = 88°; 1.64 for A = 0.98
-at α = 0.02, 89.9°). Those points (`_unresolved_points`, concrete inputs) are integrated on
-the lobe's own nodes instead (`_lobe_jit`): GGX visible normals (Heitz 2018) at 256 × 256
-product Gauss nodes, weight G₂/G₁, the map's texel at each node. That resolves any lobe
-(with the texel rules elsewhere, the mirror under a white 128 × 256 map to ≤ 6.8e-4 at
-α = 0.02–1, θ_o = 85°–89.9°, three normals; ≤ 1.4e-5 at α ≤ 0.1) but converges slowly
-across texel edges: against 512² nodes, 6e-4 to 3.7e-3 (α ≤ 0.1) and up to 1e-2 (α = 0.25)
-of the band maximum at 12 random points at 85°–89.9° on venice_sunset and forest_slope,
-where the texel rules erred 7e-3 to 3.7e-2 at α ≤ 0.1. The call warns with the number of
-such points. Traced inputs (under `jit` or `grad`) keep the texel rules everywhere.
+nodes by α alone: where it is narrower than two node spacings π/(H s) neither rule is
+converged (errors of 1e-2 and more at θ_o ≥ 88° with α ≤ 0.1; `_warn_unresolved_lobes`) and
+the call warns with the number of such points; `mc` is unbiased there.
 
 Large maps. The cost per point grows with H·W (the block rule's H W / b² nodes, the
 exhaustive rule's H W s²). `reference_radiance` (and so `envmap_radiance`)
@@ -643,52 +635,6 @@ def _batch(batch_size, n_pts, per_point):
     return int(max(1, min(batch_size, max(n_pts, 1))))
 
 
-@functools.lru_cache(maxsize=4)
-def lobe_nodes(m: int):
-    """Product Gauss–Legendre nodes (m², 2) of the unit square and their weights (m²,),
-    summing to 1 (host float64)."""
-    x, w = np.polynomial.legendre.leggauss(m)
-    x, w = (x + 1) / 2, w / 2
-    u1, u2 = np.meshgrid(x, x, indexing="ij")
-    return np.stack([u1.ravel(), u2.ravel()], -1), np.outer(w, w).ravel()
-
-
-@functools.partial(jax.jit, static_argnums=(7,))
-def _lobe_jit(film, alpha, normal, view, radiance, idx, nodes, cfg):
-    """The reference at the points `idx` (flat) whose lobe the texel nodes cannot resolve
-    (module docstring, "Grazing views"): the lobe's own coordinates, GGX visible normals
-    (Heitz 2018) at product Gauss nodes (u₁, u₂), weight G₂/G₁, the piecewise-constant
-    map's texel at each ω_i (`lookup_nearest`: the map itself), R_jk from the film's table.
-    Returns (len(idx), J)."""
-    observer, n_cos, cross, arithmetic, one_film = cfg
-    dtype = alpha.dtype
-    obs = cross_band_name(observer) if cross else observer
-    mat, point = point_split(film, alpha.shape)
-    sub = jax.tree.map(lambda v: v[idx], mat)
-    flat = (sub, alpha.reshape(-1)[idx], normal.reshape(-1, 3)[idx], view.reshape(-1, 3)[idx])
-    u, wq = nodes
-    shared = (_r_table(point(first_point(mat)), obs, n_cos, arithmetic, dtype)
-              if one_film else None)
-
-    def one(xs):
-        m, a, n, wo = xs
-        t, b = _local_frame(n)
-        frame = jnp.stack([t, b, n])  # rows: local axes in world
-        wo_l = jnp.matmul(frame, wo, precision=HIGHEST)
-        h = jnp.matmul(_vndf_sample(u[:, 0], u[:, 1], wo_l, a), frame, precision=HIGHEST)
-        wi = 2 * jnp.sum(h * wo, -1, keepdims=True) * h - wo
-        ci, co = jnp.sum(wi * n, -1), jnp.sum(wo * n, -1)
-        ok = (ci > 0) & (co > 0)
-        c = jnp.clip(jnp.sum(h * wi, -1), 0.0, 1.0)
-        g = smith_g2(jnp.where(ok, ci, 1.0), jnp.where(ok, co, 1.0), a) / smith_g1(
-            jnp.where(ok, co, 1.0), a)
-        table = shared if one_film else _r_table(point(m), obs, n_cos, arithmetic, dtype)
-        light = (jnp.where(ok, g, 0.0) * wq)[:, None] * lookup_nearest(radiance, wi)
-        return _contract(_interp(table, c), light, cross)
-
-    return jax.lax.map(one, flat, batch_size=4)
-
-
 # ----------------------------------------------------------------------------- entry points
 def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, cross_band,
                    arithmetic, one_film=False, subdivisions=None, n_cos=1024, n_samples=4096,
@@ -726,33 +672,15 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
     s = int(subdivisions)
     if s < 1:
         raise ValueError(f"subdivisions must be a positive int, got {subdivisions!r}")
+    _warn_unresolved_lobes(alpha, normal, view, np.pi / h / s)
     rad = env.radiance.astype(dtype)
-    grazing = _unresolved_points(alpha, normal, view, np.pi / h / s)
-
-    def finish(out, est):  # the lobe's own nodes where the texel nodes cannot resolve it
-        if grazing is not None:
-            warnings.warn(
-                f"envmap_radiance(method='reference'): at {grazing.size} of "
-                f"{int(np.prod(alpha.shape))} shading points the view is so oblique that the "
-                "reflected lobe (about 2α cos θ_o wide) is narrower than two of the texel "
-                "nodes: they are integrated on the lobe's own nodes instead (GGX visible "
-                f"normals, {LOBE_NODES}² Gauss nodes, the map's texel at each), which "
-                "converge slowly across texel edges: ≈ 1e-3 to 1e-2 of the band maximum on "
-                "textured maps at θ_o = 85°–89.9° (1e-4 on a white map)", stacklevel=4)
-            lobe = _lobe_jit(film, alpha, normal, view, rad, jnp.asarray(grazing),
-                             tuple(jnp.asarray(x, dtype) for x in lobe_nodes(LOBE_NODES)),
-                             (observer, int(n_cos), bool(cross_band), arithmetic, one_film))
-            out = out.reshape(-1, out.shape[-1]).at[grazing].set(lobe).reshape(out.shape)
-            est = est.reshape(-1).at[grazing].set(0.0).reshape(est.shape)
-        return (out, est) if return_estimate else out
-
     if exhaustive:
         d, wt, idx = texel_nodes(*env.shape, s)
         nodes = (jnp.asarray(d, dtype), jnp.asarray(wt, dtype)[:, None] * rad.reshape(-1, 3)[idx])
         cfg = ("reference", observer, s, int(n_cos), bool(cross_band), arithmetic,
                _batch(batch_size, n_pts, len(wt)), one_film)
         out = _exact_jit(film, alpha, normal, view, rad, nodes, cfg)
-        return finish(out, jnp.zeros(alpha.shape, dtype))
+        return (out, jnp.zeros(alpha.shape, dtype)) if return_estimate else out
     b = block_size(*env.shape)
     counts = (refine_counts(h * env.shape[1] // b**2, b, s, a_min * h / np.pi)
               if refine is None else tuple(int(x) for x in refine))
@@ -764,7 +692,7 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
     cfg = (observer, s, int(n_cos), bool(cross_band), arithmetic, counts,
            one_film, max(1, min(chunk, max(n_pts, 1))))
     out, est = _adaptive_jit(film, alpha, normal, view, rad, geo, None, cfg)
-    return finish(out, est)
+    return (out, est) if return_estimate else out
 
 
 @functools.partial(jax.jit, static_argnums=(1, 2))
@@ -795,28 +723,31 @@ def _adaptive_geometry(rad, b: int, s: int):
     return blocks, texels, tuple(jnp.asarray(x, dtype) for x in sub_nodes(h, w, s))
 
 
-LOBE_NODES = 256  # m of the m × m lobe nodes at the grazing points (`_lobe_jit`)
-
-
-def _unresolved_points(alpha, normal, view, spacing: float):
-    """Flat indices (int32) of the points whose lobe the texel nodes cannot resolve (module
-    docstring, "Grazing views"), or None (none, or inputs traced: there the texel rules
-    stand).
+def _warn_unresolved_lobes(alpha, normal, view, spacing: float) -> None:
+    """Warn where the quadrature cannot resolve the reflected lobe (concrete inputs only).
 
     At a grazing view the lobe in ω_i is squeezed against the tangent plane: its width at
-    the peak is ℓ = 2α⟨h,ω_i⟩ ≈ 2α cos θ_o, while s = `auto_subdivisions` sizes the nodes
-    (spacing π/(H s)) by α alone. Where ℓ < 2 × spacing neither texel rule, the exhaustive
-    one included, converges: a near-mirror under a white 128 × 256 map misses A(θ_o, α) by
-    5e-3 at α = 0.1, θ_o = 88°, 1.2e-2 to 2.5e-2 at α = 0.05, 88°, and gives 1.64 for 0.98
-    at α = 0.02, 89.9° (where `mc` agrees with A); at ℓ ≥ 2.8 spacings (α = 0.25, 86°) the
-    texel rules err 6e-4."""
+    the peak is ℓ = 2α⟨h,ω_i⟩ ≈ 2α cos θ_o (module docstring), while s = `auto_subdivisions`
+    sizes the nodes (spacing π/(H s)) by α alone. Where ℓ < 2 × spacing neither rule, the
+    exhaustive one included, is converged: a near-mirror under a white 128 × 256 map gives
+    A(θ_o, α) to 5e-3 at α = 0.1, θ_o = 88°, 1.2e-2 to 2.5e-2 at α = 0.05, 88°, and 0.66 at
+    α = 0.02, 89.9° (L = 1.64 > 1), where `method="mc"` stays unbiased (measured within its
+    standard error); at ℓ ≥ 2.8 × spacing (α = 0.25, 86°) the error is 6e-4."""
     if not all(_concrete(x) for x in (alpha, normal, view)):
-        return None
+        return
     n, v = np.asarray(normal, float), np.asarray(view, float)
     cos_o = np.sum(n * v, axis=-1)
-    width = 2 * np.broadcast_to(np.asarray(alpha, float), cos_o.shape) * cos_o
-    bad = np.flatnonzero((cos_o > 0) & (width < 2 * spacing))
-    return bad.astype(np.int32) if bad.size else None
+    width = 2 * np.asarray(alpha, float) * cos_o
+    bad = (cos_o > 0) & (width < 2 * spacing)
+    if np.any(bad):
+        worst = np.degrees(np.arccos(np.clip(np.min(cos_o[bad]), -1, 1)))
+        warnings.warn(
+            f"envmap_radiance(method='reference'): at {int(np.sum(bad))} of {bad.size} "
+            f"shading points the view is so oblique (θ_o up to {worst:.1f}°) that the "
+            f"reflected lobe, about 2α cos θ_o wide (down to {np.min(width[bad]):.2g} rad), "
+            f"is narrower than twice the quadrature's node spacing ({spacing:.2g} rad): the "
+            "reference is not converged there (errors of 1e-2 and more at θ_o ≥ 88° with "
+            "α ≤ 0.1); method='mc' is unbiased there", stacklevel=4)
 
 
 def _same(x) -> bool:

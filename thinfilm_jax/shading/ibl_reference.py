@@ -68,7 +68,9 @@ point builds its R_jk table once.
 Grazing views. Near θ_o = 90° the lobe in ω_i is about 2α cos θ_o wide, while s sizes the
 nodes by α alone: where it is narrower than two node spacings π/(H s) neither rule is
 converged (errors of 1e-2 and more at θ_o ≥ 88° with α ≤ 0.1; `_warn_unresolved_lobes`) and
-the call warns with the number of such points; `mc` is unbiased there.
+the call warns with the number of such points; `mc` is unbiased there. (Nodes that follow
+the lobe, GGX visible normals at Gauss nodes with the map's texel at each, fix a white map
+but converge slowly across texel edges: docs/studies/ibl.md.)
 
 Large maps. The cost per point grows with H·W (the block rule's H W / b² nodes, the
 exhaustive rule's H W s²). `reference_radiance` (and so `envmap_radiance`)

@@ -76,7 +76,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -372,13 +374,31 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
             out = np.zeros((len(n), get_observer(cfg.observer).n_bands))
             chunk = min(CHUNK, len(n))
             steps = range(0, len(n), chunk)
+            grazing = 0
             for s in tqdm(steps, desc=f"render {m}", unit="chunk",
                           disable=not progress or len(steps) < 2):
                 k = min(chunk, len(n) - s)
-                idx = np.minimum(np.arange(s, s + chunk), len(n) - 1)  # one shape: one compile
-                out[s:s + k] = np.asarray(envmap_radiance(
-                    cfg.material, cfg.alpha, n[idx], view[idx], src, method=m,
-                    observer=cfg.observer, max_height=None))[:k]
+                # one shape, one compile: pad with the chunk's least oblique point (the pads
+                # do not count among the reference's grazing points)
+                pad = s + int(np.argmax(np.sum(n[s:s + k] * view[s:s + k], -1)))
+                idx = np.where(np.arange(s, s + chunk) < len(n), np.arange(s, s + chunk), pad)
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    out[s:s + k] = np.asarray(envmap_radiance(
+                        cfg.material, cfg.alpha, n[idx], view[idx], src, method=m,
+                        observer=cfg.observer, max_height=None))[:k]
+                for w in caught:
+                    hit = re.match(r".*at (\d+) of \d+ shading points the view is so oblique",
+                                   str(w.message))
+                    if hit:
+                        grazing += int(hit.group(1))
+                    else:
+                        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            if grazing:
+                notes[m] = "; ".join(filter(None, [notes.get(m), (
+                    f"{grazing} silhouette points where the view is so oblique that the lobe "
+                    "is narrower than two texel nodes: the reference is not converged there "
+                    "(ibl_reference, 'Grazing views')")]))
         else:
             pref = method_map(cache, "map", m, cfg.observer)
             obs = DEFAULT_OBSERVER if m == "khr" else cfg.observer

@@ -11,7 +11,7 @@ $$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega
 | `filtered`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_r, α), R̄ = K 29 with the prefiltered moments μ_ω, Σ_ω (`kernels.filtered_kernel`) |
 | `khr`       | A(θ_o, α) · F_iridescence(cos θ_o) ⊙ P(ω_r, α): glTF `KHR_materials_iridescence` (SPEC §10, `spectral.khr`) at h = n as `ideal`, per channel: its linear Rec. 709 RGB times the map's linear RGB, the vec3 Fresnel × vec3 prefiltered specular product glTF engines compute (the Khronos sample renderer's `pbr.frag` reads F_iridescence at ⟨n, v⟩ and multiplies the prefiltered radiance by it with no split-sum scale: its value is this one over A); `cross_band`, `options` and the map's Ŝ table do not apply; a map with split sources is refused |
 | `colour_table` | A(θ_o, α) · Σ_k C_jk(ω_r, θ_o) P_k(ω_r, α): Kneiphof & Klein 2022, the colour R_jk prefiltered with the map and the GGX lobe into a table over (ω_r, θ_o), decomposed into a map of ω_r times a function of θ_o (`colour_table`, SPEC §11); `envmap` is the `ColourTable` that `prefilter_colour` built for this film and α (checked) |
-| `improved`  | A(θ_o, α) · (1/K) Σ_b Σ_k R_jk(bin b) P_k(ω_μ,b, α_eff,b): K 29 per equal-probability bin b of cos θ₁, each bin times the prefiltered radiance of its own part of the lobe (tabulated mean direction and equal-variance level; near normal view their mean moved to the whole lobe's read) (`ibl.improved_envmap`, docs/improved.md) |
+| `improved`  | A(θ_o, α) · (1/K) Σ_b Σ_k R_jk(bin b) P_k,b: K 29 per equal-probability bin b of cos θ₁, each bin times read b of K prefiltered reads fitted to the lobe's shape (`improved.lookup_reads`), at the bin's cosine moved by the read's light-weighted mean direction (`ibl.improved_envmap`, docs/improved.md) |
 
 R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the per-channel
 ("diagonal") approximation L_j ≈ R_j P_j is the option `cross_band=False`.
@@ -19,7 +19,8 @@ R_jk are the cross bands S_j B_k of the Mallett–Yuksel uplift (`uplift`); the 
 Reference accuracy and cost: `thinfilm_jax.shading.ibl_reference` (its docstring); the exhaustive
 rule (every texel with s × s nodes) stays reachable there as `exhaustive=True`, and
 tests/shading/test_ibl_reference.py compares the two. The convergence (the SPEC's 1e-3 of the band
-maximum) is tested in tests/shading/test_ibl.py.
+maximum) is tested in tests/shading/test_ibl.py; where a grazing view squeezes the lobe below
+two node spacings the reference is not converged and warns (`ibl_reference`, "Grazing views").
 
 Example (a white map is the uniform light of `patch_radiance`, since Σ_k R_jk = R_j: at normal
 view the tabulated A and the level √α = 0.5 are exact nodes, measured agreement 3e-9; a point

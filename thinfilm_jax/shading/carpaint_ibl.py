@@ -17,7 +17,7 @@ colour table, seen through the coat) and the coat's mirror term F(θ_o) L(ω_r),
   θ_o ∈ {0, 0.5, 1.2, 1.5} (tests/shading/test_carpaint_ibl.py).
 * `paint_envmap_radiance(paint, normal, view, envmap, method="reference")`: every texel of the
   piecewise-constant map with s × s Gauss–Legendre nodes in (cos θ, φ)
-  (`ibl_reference.texel_nodes`, the exhaustive rule of `material_envmap_radiance`;
+  (`ibl_integrand.texel_nodes`, the exhaustive rule of `material_envmap_radiance`;
   s = `ibl_reference.auto_subdivisions` of the sharpest lobe's α unless given), plus the
   mirror term read from the texel that contains ω_r (exact for the piecewise-constant map).
   A constant 16 × 32 map reproduces the patch to ≤ 1.1e-7 (example paints, s automatic).
@@ -62,7 +62,8 @@ from ..brdf import carpaint as C
 from ..brdf import ndf as _ndf
 from ..core import _validate as V
 from .envmap import EnvMap, load_envmap, lookup_nearest
-from .ibl_reference import _local_frame, auto_subdivisions, texel_nodes
+from .ibl_integrand import _local_frame, texel_nodes
+from .ibl_reference import auto_subdivisions
 
 __all__ = ["paint_patch_radiance", "paint_envmap_radiance", "METHODS"]
 

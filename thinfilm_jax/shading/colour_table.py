@@ -82,7 +82,7 @@ from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 from ..spectral.uplift import cross_band_name
 from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, texel_centers,
                      texel_solid_angles)
-from .ibl_reference import _interp, _local_frame, _lobe_cos_weight, _r_table, texel_nodes
+from .ibl_integrand import _interp, _local_frame, _lobe_cos_weight, _r_table, texel_nodes
 from ..realtime.improved import bin_table
 from .prefilter import bin_radiance, filter_level, level_source
 

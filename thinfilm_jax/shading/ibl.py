@@ -60,8 +60,8 @@ from ..optics.airy import choose_arithmetic
 from .colour_table import ColourTable, check_colour_table, colour_table_radiance
 from .envmap import EnvMap, load_envmap
 from ..core.film import Film
-from .ibl_reference import (_interp, _lobe_cos_weight, _r_table,  # noqa: F401 (re-exported)
-                            auto_subdivisions, exact_radiance, texel_nodes)
+from .ibl_integrand import _interp, _lobe_cos_weight, _r_table, texel_nodes  # noqa: F401 (re-exported)
+from .ibl_reference import auto_subdivisions, exact_radiance  # noqa: F401 (re-exported)
 from ..optics.fresnel import safe_sqrt
 from ..realtime.improved import BinTable, bin_bands, bin_table, lookup_bins, scan_bins
 from ..realtime.kernels import filtered_kernel, ideal_kernel

@@ -19,7 +19,7 @@ material's bands:
   `brdf_value`.
 
 `method="reference"`: every texel with s × s Gauss–Legendre nodes in (cos θ, φ)
-(`ibl_reference.texel_nodes`, the exhaustive rule's nodes; s = `ibl_reference.auto_subdivisions`
+(`ibl_integrand.texel_nodes`, the exhaustive rule's nodes; s = `ibl_reference.auto_subdivisions`
 of the lobe's effective α — α for GGX/Beckmann (the smaller of α_x, α_y), Walter's
 √(2/(s+2)) for the Phong exponents, 1 for a purely diffuse material — unless given).
 `method="mc"`: cosine-weighted sampling of ω_i about n (pdf ⟨n,ω_i⟩/π, any material, no
@@ -61,7 +61,8 @@ from ..spectral.reflectance import spectral_bands
 from ..spectral.spectra import get_observer
 from ..spectral.uplift import cross_band_name
 from .envmap import EnvMap, load_envmap, lookup_nearest
-from .ibl_reference import _interp, _local_frame, _r_table, auto_subdivisions, texel_nodes
+from .ibl_integrand import _interp, _local_frame, _r_table, texel_nodes
+from .ibl_reference import auto_subdivisions
 from .material_patch import diffuse_only
 
 __all__ = ["material_envmap_radiance", "METHODS", "effective_alpha"]

@@ -475,7 +475,8 @@ def diagnose(name: str, cfg: Config, verbose=True, nh: int = 2048) -> list[dict]
     from ..realtime.improved import bin_bands, bin_table, lookup_bins
     from ..shading.envmap import downsample
     from ..shading.ibl import DEFAULT_SOURCES
-    from ..shading.ibl_reference import _lobe_cos_weight, resample_factor, texel_nodes
+    from ..shading.ibl_integrand import _lobe_cos_weight, texel_nodes
+    from ..shading.ibl_reference import resample_factor
     from ..shading.prefilter import bin_radiance, lookup_albedo, prefilter_envmap
     from ..spectral.colorimetry import delta_e2000
     from ..spectral.uplift import cross_band_name

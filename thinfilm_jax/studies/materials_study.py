@@ -92,6 +92,7 @@ from ..spectral.colorimetry import delta_e2000
 from ..spectral.reflectance import band_centroids, band_film, rgb_reflectance
 from ._common import SB, error_stats
 from ._timing import environment, fmt, write_report
+from .materials_figures import fit_groups, fit_key, plot_charts, plot_realtime, plot_silicon
 
 #: (label, film material, base material): the charts' films on silicon
 CHART_FILMS = (("SiO2 on Si", "SiO2", "Si"), ("Si3N4 on Si", "Si3N4", "Si"))
@@ -117,7 +118,6 @@ REALTIME_METHODS = ("ideal", "filtered", "improved")
 GRID_NM = np.arange(360.0, 831.0, 1.0)  # the common index grid and the charts' wavelengths
 CONSTANT_AT_NM = 550.0
 N_D_589 = 589.0  # the sodium D line, the classic "n_D"
-_PNG_METADATA = {"Software": None}  # PNGs depend on their pixels only
 
 
 @dataclass(frozen=True)
@@ -504,7 +504,7 @@ def run(cfg: MaterialsConfig = MaterialsConfig(), out="figures", verbose: bool =
               "charts": charts, "silicon": silicon, "realtime": realtime,
               "environment": environment(), "times": times}
     if cfg.figures:
-        plot_charts(result, f"{out}/materials_charts.png")
+        plot_charts(result, f"{out}/materials_charts.png", CHART_FILMS)
         plot_silicon(result, f"{out}/materials_silicon.png")
         plot_realtime(result, f"{out}/materials_realtime.png")
     result["charts"] = slim_charts(charts, cfg.chart_json_step_nm)
@@ -512,14 +512,6 @@ def run(cfg: MaterialsConfig = MaterialsConfig(), out="figures", verbose: bool =
     if verbose:
         print(text)
     return result
-
-
-def _fit_key(r: dict) -> tuple:
-    return r["model_film"], r["model_base"], r["data"], r["free"]
-
-
-def _fit_groups(fits: list) -> list:
-    return list(dict.fromkeys(_fit_key(r) for r in fits))
 
 
 def _stats(e: dict) -> str:
@@ -574,8 +566,8 @@ def markdown(res: dict) -> str:
                 "residual: max | converged | ambiguous |",
                 "|---|---|---|---|---|---|---|---|---|---|---|"]
         fits = si["fits"]
-        for key in _fit_groups(fits):
-            g = [r for r in fits if _fit_key(r) == key]
+        for key in fit_groups(fits):
+            g = [r for r in fits if fit_key(r) == key]
             b = np.array([r["bias_nm"] for r in g])
             # an exact model leaves no residual: its stderr is rounding, the ratio meaningless
             exact = max(r["rms_residual"] for r in g) < 1e-10
@@ -628,131 +620,6 @@ def markdown(res: dict) -> str:
                    f"{r['method']} | {r['dispersion']} | {_stats(r['dispersive'])} | "
                    f"{_stats(r['constant'])} | {cen} |")
     return "\n".join(out) + "\n"
-
-
-# ---------------------------------------------------------------------------- figures
-
-
-def _save(fig, path):
-    from pathlib import Path
-
-    from ..core._io import atomic_write
-
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png",
-                                               metadata=_PNG_METADATA))
-
-
-def plot_charts(res: dict, path: str):
-    """Rows: film × angle; columns: illuminants; each a thickness strip."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ch = res["charts"]
-    d = np.asarray(ch["thickness_nm"])
-    ills = res["config"]["illuminants"]
-    angles = ch["angles_deg"]
-    nrow = len(CHART_FILMS) * len(angles)
-    fig, axes = plt.subplots(nrow, len(ills), figsize=(6.2 * len(ills), 0.62 * nrow + 1.3),
-                             squeeze=False)
-    for j, ill in enumerate(ills):
-        for i, (label, _, _) in enumerate(CHART_FILMS):
-            rgb = np.asarray(ch["charts"][f"{label} | {ill}"]["srgb"])
-            for k, a in enumerate(angles):
-                ax = axes[i * len(angles) + k, j]
-                ax.imshow(rgb[None, :, k], aspect="auto", interpolation="nearest",
-                          extent=(d[0], d[-1], 0, 1))
-                ax.set_yticks([])
-                ax.set_xticks(np.arange(0, d[-1] + 1, 100))
-                if i * len(angles) + k < nrow - 1:
-                    ax.set_xticklabels([])
-                if j == 0:
-                    ax.set_ylabel(f"{label.replace('2', '₂').replace('3N4', '₃N₄')}\n"
-                                  f"θ = {a:g}°", rotation=0, ha="right", va="center",
-                                  fontsize=8)
-            axes[0, j].set_title(f"{ill}" + ("" if ill == "D65" else " (CAT02 → D65)"))
-        axes[-1, j].set_xlabel("film thickness d (nm)")
-    fig.suptitle("Exact R(λ) 360–830 nm (stack_reflectance, Malitson SiO₂, Philipp Si₃N₄, "
-                 "Schinke Si, unpolarised)\n→ CIE 1931 2° XYZ under the illuminant → sRGB "
-                 "(perfect diffuser = white, no exposure)", fontsize=9)
-    fig.tight_layout()
-    _save(fig, path)
-    plt.close(fig)
-
-
-def plot_silicon(res: dict, path: str):
-    """ΔE₀₀ against thickness per Si constant; fitted-thickness bias against thickness."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    si = res["silicon"]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
-    d = np.asarray(si["thickness_nm"])
-    for r in si["rows"]:
-        axes[0].plot(d, r["dE_curve"], label=f"{r['constant']}, θ = {r['theta_deg']:g}°",
-                     ls="-" if r["theta_deg"] == 0 else "--")
-    axes[0].set(xlabel="SiO₂ thickness (nm)", ylabel="ΔE₀₀ vs dispersive Si",
-                title="SiO₂ on constant Si against Schinke Si (bands, equal-energy light)")
-    axes[0].legend(fontsize=7)
-    for key in _fit_groups(si["fits"]):
-        if key[1].startswith("Si at"):
-            continue  # within 1.5 nm of the 3.9 + 0.02i rows (the table has both)
-        g = [r for r in si["fits"] if _fit_key(r) == key]
-        axes[1].plot([r["thickness_nm"] for r in g], [r["bias_nm"] for r in g], "o-", ms=3,
-                     ls="-" if key[3] == "thickness" else ":",
-                     label=f"model {key[0]} on {key[1]}; data: {key[2]}; free: {key[3]}")
-    axes[1].axhline(0.0, color="k", lw=0.5)
-    axes[1].set(xlabel="true SiO₂ thickness (nm)", ylabel="fitted − true (nm)",
-                title="fit_spectrum with constant indices, dispersive data")
-    axes[1].legend(fontsize=6)
-    fig.tight_layout()
-    _save(fig, path)
-    plt.close(fig)
-
-
-def plot_realtime(res: dict, path: str):
-    """Mean ΔE₀₀ per material and method: dispersive (band centroids) vs constant film."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rt = res["realtime"]
-    alphas = rt["alphas"]
-    mats = list(dict.fromkeys(r["material"] for r in rt["rows"]))
-    methods = list(dict.fromkeys(r["method"] for r in rt["rows"]))
-    fig, axes = plt.subplots(len(alphas), 1, figsize=(11, 3.4 * len(alphas)), squeeze=False)
-    w = 0.8 / (2 * len(methods) + 1)
-    for ia, alpha in enumerate(alphas):
-        ax = axes[ia, 0]
-        for im, m in enumerate(methods):
-            for iv, (var, hatch) in enumerate((("dispersive", ""), ("constant", "//"))):
-                vals = [next(r[var]["dE_mean"] for r in rt["rows"] if r["material"] == mat
-                             and r["method"] == m and r["alpha"] == alpha) for mat in mats]
-                ax.bar(np.arange(len(mats)) + (2 * im + iv + 0.5) * w - 0.4, vals, w,
-                       hatch=hatch,
-                       color=f"C{im}", edgecolor="k", lw=0.4,
-                       label=f"{m} [{METHOD_INFO[m].dispersion}], {var}" if ia == 0 else None)
-        cen = [next(r["centroid_only"]["dE_mean"] for r in rt["per_material"]
-                    if r["material"] == mat and r["alpha"] == alpha) for mat in mats]
-        ax.scatter(np.arange(len(mats)) + (2 * len(methods) + 0.5) * w - 0.4, cen, marker="D",
-                   color="k", s=14, label="exact integrator at the centroids" if ia == 0 else None)
-        held = {r["material"]: r["held_out"] for r in rt["rows"]}
-        ax.set_xticks(np.arange(len(mats)))
-        ax.set_xticklabels([m + (" (held out)" if held[m] else "") for m in mats], fontsize=7)
-        ax.set_ylabel("mean ΔE₀₀ vs reference")
-        ax.set_title(f"α = {alpha:g}: dispersive film ([bands]: indices at the band centroids; "
-                     f"[exact]: at every λ) vs the constant film (n at "
-                     f"{rt['constant_at_nm']:.0f} nm), each against its own reference",
-                     fontsize=9)
-    axes[0, 0].legend(fontsize=7, ncol=4)
-    fig.tight_layout()
-    _save(fig, path)
-    plt.close(fig)
 
 
 def main(argv=None) -> int:

@@ -140,14 +140,10 @@ def facade_map(seed: int = 0, h: int = MAP_HEIGHT, night: bool = False):
         rad = _sky(h, (1.2, 1.35, 1.6), (2.0, 2.0, 2.0), (0.35, 0.33, 0.3))
     el, az = _angles(h)
     texel = np.pi / h
-    a0 = 0.0
-    while a0 < 2 * np.pi - 0.05:
-        width = min(rng.uniform(0.15, 0.6), 2 * np.pi - a0)
-        top = rng.uniform(0.15, 0.75)  # roof elevation, rad
+    for cols, top in _buildings(rng, az, (0.15, 0.6), (0.15, 0.75)):
         wall = rng.uniform(0.3, 1.0, 3) * rng.uniform(0.3, 0.8)
         if night:
             wall = wall * 0.04
-        cols = (az >= a0) & (az < a0 + width)
         rows = (el > -0.02) & (el < top)
         rad[np.ix_(rows, cols)] = wall
         # windows: cells of (dx, dy) texels, each window wx × wy texels
@@ -167,13 +163,24 @@ def facade_map(seed: int = 0, h: int = MAP_HEIGHT, night: bool = False):
                 else:
                     win = np.array([0.8, 0.9, 1.0]) * rng.uniform(2, 4) * wall.mean()
                 rad[i:i + wy, j:j + wx] = win
-        a0 += width
     if night:
         for _ in range(40):  # street lamps round the square
             _paint_disc(rad, rng.uniform(0.0, 0.12), rng.uniform(0, 2 * np.pi),
                         texel * rng.uniform(0.5, 2.0),
                         LAMP_COLOURS[rng.integers(2)] * 10 ** rng.uniform(2.0, 3.0))
     return EnvMap(rad)
+
+
+def _buildings(rng, az, widths, tops):
+    """The buildings round a square's horizon, in order of azimuth: per building its
+    columns (a mask of `az`) and roof elevation (rad), widths and roof heights drawn
+    uniformly from `widths` and `tops` (rad; the last building closes the circle)."""
+    a0 = 0.0
+    while a0 < 2 * np.pi - 0.05:
+        width = min(rng.uniform(*widths), 2 * np.pi - a0)
+        top = rng.uniform(*tops)
+        yield (az >= a0) & (az < a0 + width), top
+        a0 += width
 
 
 def power_share(envmap, factor: float = 10.0):
@@ -194,11 +201,7 @@ def festoon_map(seed: int = 0, h: int = MAP_HEIGHT):
     rad = _sky(h, (0.15, 0.18, 0.35), (0.9, 0.6, 0.45), (0.08, 0.07, 0.065))
     el, az = _angles(h)
     texel = np.pi / h
-    a0 = 0.0
-    while a0 < 2 * np.pi - 0.05:
-        width = min(rng.uniform(0.2, 0.5), 2 * np.pi - a0)
-        top = rng.uniform(0.2, 0.6)
-        cols = (az >= a0) & (az < a0 + width)
+    for cols, top in _buildings(rng, az, (0.2, 0.5), (0.2, 0.6)):
         wall = rng.uniform(0.4, 1.0, 3) * 0.25
         lit = rng.uniform() < 0.5  # its upper storeys catch the low sun
         for i in np.nonzero((el > -0.02) & (el < top))[0]:
@@ -209,7 +212,6 @@ def festoon_map(seed: int = 0, h: int = MAP_HEIGHT):
         cj = np.nonzero(cols)[0]
         for j in cj[1:-3:rng.integers(6, 12)]:
             rad[shop[0]:shop[-1], j:j + 3] = np.array([1.0, 0.85, 0.6]) * rng.uniform(8, 30)
-        a0 += width
     for _ in range(6):  # strings of bulbs: catenaries between two points on the skyline
         az1, az2 = rng.uniform(0, 2 * np.pi, 2)
         sag, h0 = rng.uniform(0.05, 0.2), rng.uniform(0.3, 0.6)

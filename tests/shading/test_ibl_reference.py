@@ -40,10 +40,11 @@ def test_adaptive_matches_exhaustive(alpha):
     """Same points, the shipped 128 × 256 sunset map: the adaptive rule (a second-order
     Taylor rule per 4 × 4-texel block with the light's exact moments, the texel interpolant
     in the K blocks it scores worst, s × s Gauss nodes in the K₃ texels it scores worst
-    among theirs, `refine_counts`) agrees with every texel at s × s nodes to ≤ 5e-4 of each
-    band's maximum (measured 1.9e-6, 4.3e-6, 7.1e-5, 8.6e-5, 8.2e-5, 1.7e-4 at α = 0.05,
-    0.1, 0.15, 0.25, 0.6, 1 on these 6 points, two of them at 85° from the normal; ≤ 3.3e-4
-    on 58 points of each shipped map at twelve α from 0.03 to 1); the SPEC's bound is 1e-3.
+    among theirs, `refine_counts`) agrees with every texel at s × s nodes to ≤ 1.5e-4 of
+    each band's maximum, 2.5e-4 at α = 1 (measured 1.9e-6, 4.3e-6, 7.1e-5, 8.6e-5, 8.2e-5,
+    1.7e-4 at α = 0.05, 0.1, 0.15, 0.25, 0.6, 1 on these 6 points, two of them at 85° from
+    the normal; ≤ 3.3e-4 on 58 points of each shipped map at twelve α from 0.03 to 1); the
+    SPEC's bound is 1e-3.
     The former fixed K₃ = 64 s² misses at α = 0.1 (2.5e-3): the lobe spans more texels than
     256. Without the sub-texel level the grazing points miss by 9e-3 at α = 0.05,
     without the texel rule by 0.42. The estimate of the neglected part is finite and ≥ 0
@@ -54,7 +55,8 @@ def test_adaptive_matches_exhaustive(alpha):
     new, est = _run(env, alpha, n, v)
     old, new, est = map(np.asarray, (old, new, est))
     scale = np.abs(old).max(axis=0)
-    assert np.all(np.abs(new - old).max(axis=0) <= 5e-4 * scale), np.abs(new - old).max(0) / scale
+    bound = 2.5e-4 if alpha == 1.0 else 1.5e-4
+    assert np.all(np.abs(new - old).max(axis=0) <= bound * scale), np.abs(new - old).max(0) / scale
     assert np.all(np.isfinite(est)) and np.all(est >= 0)
 
 

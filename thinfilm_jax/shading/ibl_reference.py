@@ -208,6 +208,15 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
     return (out, est) if return_estimate else out
 
 
+class GrazingLobeWarning(UserWarning):
+    """`envmap_radiance(method="reference")` at `count` of `total` shading points whose lobe
+    the texel nodes cannot resolve (module docstring, "Grazing views")."""
+
+    def __init__(self, message: str, count: int, total: int):
+        super().__init__(message)
+        self.count, self.total = count, total
+
+
 def _warn_unresolved_lobes(alpha, normal, view, spacing: float) -> None:
     """Warn where the quadrature cannot resolve the reflected lobe (concrete inputs only).
 
@@ -226,13 +235,14 @@ def _warn_unresolved_lobes(alpha, normal, view, spacing: float) -> None:
     bad = (cos_o > 0) & (width < 2 * spacing)
     if np.any(bad):
         worst = np.degrees(np.arccos(np.clip(np.min(cos_o[bad]), -1, 1)))
-        warnings.warn(
+        warnings.warn(GrazingLobeWarning(
             f"envmap_radiance(method='reference'): at {int(np.sum(bad))} of {bad.size} "
             f"shading points the view is so oblique (θ_o up to {worst:.1f}°) that the "
             f"reflected lobe, about 2α cos θ_o wide (down to {np.min(width[bad]):.2g} rad), "
             f"is narrower than twice the quadrature's node spacing ({spacing:.2g} rad): the "
             "reference is not converged there (errors of 1e-2 and more at θ_o ≥ 88° with "
-            "α ≤ 0.1); method='mc' is unbiased there", stacklevel=4)
+            "α ≤ 0.1); method='mc' is unbiased there", int(np.sum(bad)), bad.size),
+            stacklevel=4)
 
 
 def _same(x) -> bool:

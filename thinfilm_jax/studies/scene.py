@@ -76,7 +76,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -356,7 +355,7 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
 
     from ..shading.envmap import downsample
     from ..shading.ibl import envmap_radiance
-    from ..shading.ibl_reference import resample_factor
+    from ..shading.ibl_reference import GrazingLobeWarning, resample_factor
     from .render import method_map
 
     _, dirs, mask, p, _ = _frame(cfg, env)
@@ -388,10 +387,8 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
                         cfg.material, cfg.alpha, n[idx], view[idx], src, method=m,
                         observer=cfg.observer, max_height=None))[:k]
                 for w in caught:
-                    hit = re.match(r".*at (\d+) of \d+ shading points the view is so oblique",
-                                   str(w.message))
-                    if hit:
-                        grazing += int(hit.group(1))
+                    if isinstance(w.message, GrazingLobeWarning):
+                        grazing += w.message.count
                     else:
                         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
             if grazing:

@@ -103,6 +103,29 @@ def test_white_furnace_on_small_maps(height):
         assert np.abs(np.asarray(got) - want).max() <= 5e-4, (alpha, np.abs(got - want).max())
 
 
+def test_map_tables_follow_the_map():
+    """The adaptive rule keeps a map's tables while the map lives (`_map_geometry`): a second
+    map of the same size has its own light (twice the radiance, twice the result to
+    rounding), the first map again gives its own result, and an entry goes with its map."""
+    import gc
+
+    from thinfilm_jax.shading import ibl_adaptive
+
+    n, v = _points()
+    env1 = load_envmap(np.random.default_rng(0).uniform(size=(32, 64, 3)))
+    env2 = load_envmap(2 * np.asarray(env1.radiance))
+    first, _ = _run(env1, 0.3, n, v)
+    double, _ = _run(env2, 0.3, n, v)
+    again, _ = _run(env1, 0.3, n, v)
+    np.testing.assert_allclose(np.asarray(double), 2 * np.asarray(first), rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(np.asarray(again), np.asarray(first))
+    key = id(env2.radiance)
+    assert key in ibl_adaptive._GEOMETRY
+    del env2
+    gc.collect()
+    assert key not in ibl_adaptive._GEOMETRY
+
+
 def test_unresolved_grazing_lobes_warn():
     """At a grazing view the reflected lobe is about 2α cos θ_o wide, and the texel nodes
     (sized by α alone) stop resolving it: the near-mirror under a white 128 × 256 map then

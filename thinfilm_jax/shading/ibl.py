@@ -171,9 +171,9 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         raise ValueError("method='khr' shades the prefiltered map only (as glTF engines do): "
                          "prefilter it with sources=0")
     dtype = jnp.result_type(alpha, normal, view, *jax.tree.leaves(film), float)
-    film = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x, dtype), shape), film)
-    alpha = jnp.broadcast_to(jnp.asarray(alpha, dtype), shape)
-    nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
+    film = jax.tree.map(lambda x: _broadcast(x, dtype, shape), film)
+    alpha = _broadcast(alpha, dtype, shape)
+    nv = [_broadcast(v, dtype, shape + (3,)) for v in (normal, view)]
     if realtime:
         if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
             raise ValueError("the PrefilteredEnvMap was built for another observer")
@@ -187,6 +187,16 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
                           n_samples=n_samples, key=key, batch_size=batch_size,
                           max_height=max_height)
 
+
+
+def _broadcast(x, dtype, shape):
+    """x as a JAX array of `dtype` broadcast to `shape`; one already so is passed on as it is
+    (eager conversions cost 0.1–0.4 ms each: 5 % of a 52-point reference call)."""
+    if not isinstance(x, jax.Array):  # a number or host array: one transfer
+        return jnp.asarray(np.broadcast_to(np.asarray(x, dtype), shape))
+    if x.dtype == dtype and x.shape == shape:
+        return x
+    return jnp.broadcast_to(jnp.asarray(x, dtype), shape)
 
 
 def _material_envmap(material, alpha, normal, view, envmap, method, observer, kw):

@@ -8,7 +8,7 @@ over the texels t of the piecewise-constant map (radiance c_t, SPEC §9).
 Reference, adaptive (the default; `ibl_adaptive`): one node per 4 × 4-texel block from a
 second-order Taylor rule against the light's exact moments, the texel interpolant in the K
 blocks it scores worst, s × s Gauss sub-nodes in the K₃ texels it scores worst among theirs;
-within 3.3e-4 of the exhaustive rule at twelve α from 0.03 to 1 on the shipped maps, at
+within 1.9e-4 of the exhaustive rule at twelve α from 0.03 to 1 on the shipped maps, at
 7.2k node evaluations a point against 131k at α = 0.25.
 
 The exhaustive rule (every texel with s × s nodes, the reference before the adaptive one) stays
@@ -16,10 +16,11 @@ reachable as `exact_radiance(..., exhaustive=True)`: tests/shading/test_ibl_refe
 compares the two and `thinfilm_jax.studies.ibl_bench` times both in one run.
 
 Points are shaded in `jax.lax.map` steps (the exhaustive rule: one point per step, its
-intermediates, H W s² × 9 doubles, near the cache; the adaptive rule: 8 points per step
-where a point has at most 8192 nodes, else 4, `batch_size`, which amortises the
-per-operation cost of its small gathers: 1.3× faster than one); one film shared by every
-point builds its R_jk table once.
+intermediates, H W s² × 9 doubles, near the cache; the adaptive rule: up to 16 points per
+step where a point has at most 8192 nodes, else 4, shared evenly over the steps,
+`batch_size`, which amortises the per-operation cost of its small gathers); one film shared
+by every point builds its R_jk table once, and the adaptive rule's per-map tables are kept
+while the map lives.
 
 Grazing views. Near θ_o = 90° the lobe in ω_i is about 2α cos θ_o wide, while s sizes the
 nodes by α alone: where it is narrower than two node spacings π/(H s) neither rule is

@@ -811,8 +811,9 @@ SPECS = [
              r"\s+costs (\S+)× `filtered` as published \((\S+)× `filtered` with the same "
              r"split\)", ("kernel_bench.json",),
              _improved_cost_sentence),
-    Sentence(r"α = 0.25 and 0.6 \((\S+)× and (\S+)×: (\S+) and (\S+) points/s against (\S+) and "
-             r"(\S+)\), met at\s+α = 0.05 \((\S+)×\)(?s:.*?)at α = 0.25: (\S+) points/s here",
+    Sentence(r"\*\*met\*\*,\s+(\S+)× and (\S+)× at α = 0.25 and 0.6 \((\S+) and (\S+) points/s "
+             r"against (\S+) and (\S+)\), (\S+)× at\s+α = 0.05(?s:.*?)baadfe4(?s:.*?) at (\S+) "
+             r"points/s: the difference",
              ("reference_bench.json",), _reference_bench_sentence),
     Sentence(r"included, once warm: there `filtered` costs (\S+)× `ideal` and `improved` (\S+)× "
              r"`filtered`,(?s:.*?)`ideal` takes (\S+) ns a point there,\s+(\S+) ns jitted",

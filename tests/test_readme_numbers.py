@@ -815,7 +815,8 @@ SPECS = [
              r"against (\S+) and (\S+)\), (\S+)× at\s+α = 0.05(?s:.*?)baadfe4(?s:.*?) at (\S+) "
              r"points/s: the difference",
              ("reference_bench.json",), _reference_bench_sentence),
-    Sentence(r"included, once warm: there `filtered` costs (\S+)× `ideal` and `improved` (\S+)× "
+    Sentence(r"included, warm minima of 3 interleaved rounds: there `filtered` costs (\S+)× "
+             r"`ideal` and\s+`improved` (\S+)× "
              r"`filtered`,(?s:.*?)`ideal` takes (\S+) ns a point there,\s+(\S+) ns jitted",
              ("ibl_bench.json", "kernel_bench_sizes.json"), _ibl_frame_ratios),
     Table("| points | filtered / ideal | improved / filtered |", ("kernel_bench_sizes.json",), 1,

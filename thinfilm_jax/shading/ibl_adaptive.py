@@ -38,9 +38,9 @@ the shipped 128 × 256 maps: 32 × 64 blocks of 5.6°; `block_size`). Per shadin
    divide) level 2 is skipped and level 3 refines blocks.
 4. *Neglected part.* At levels 2 and 3 the difference between the new and the replaced
    values of the refined regions calibrates the score: est = max(|fine − coarse| / score) ·
-   Σ_(not refined) score, summed over the two levels and returned by
-   `exact_radiance(..., return_estimate=True)` per point, an estimate of what the rule left
-   out (not a rigorous bound).
+   Σ_(not refined) score (at level 3 over the candidates' texels only), summed over the two
+   levels and returned by `exact_radiance(..., return_estimate=True)` per point, an
+   estimate of what the rule left out (not a rigorous bound).
 
 With every block and texel refined (`refine=(T_B, T)`) the result is the exhaustive rule's
 to rounding (its nodes are the same; tests/shading/test_ibl_reference.py). With the default

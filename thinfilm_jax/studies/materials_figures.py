@@ -29,23 +29,33 @@ def fit_groups(fits: list) -> list:
     return list(dict.fromkeys(fit_key(r) for r in fits))
 
 
+def _pyplot():
+    """matplotlib.pyplot on the Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def _save(fig, path):
+    """Lay out `fig`, write it atomically as a PNG at `path` and close it."""
     from pathlib import Path
 
     from ..core._io import atomic_write
 
+    fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png",
                                                metadata=PNG_METADATA))
+    _pyplot().close(fig)
 
 
 def plot_charts(res: dict, path: str, films):
     """Rows: film × angle (`films`: the study's (label, film, base) triples); columns:
     illuminants; each a thickness strip."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     ch = res["charts"]
     d = np.asarray(ch["thickness_nm"])
@@ -74,17 +84,12 @@ def plot_charts(res: dict, path: str, films):
     fig.suptitle("Exact R(λ) 360–830 nm (stack_reflectance, Malitson SiO₂, Philipp Si₃N₄, "
                  "Schinke Si, unpolarised)\n→ CIE 1931 2° XYZ under the illuminant → sRGB "
                  "(perfect diffuser = white, no exposure)", fontsize=9)
-    fig.tight_layout()
     _save(fig, path)
-    plt.close(fig)
 
 
 def plot_silicon(res: dict, path: str):
     """ΔE₀₀ against thickness per Si constant; fitted-thickness bias against thickness."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     si = res["silicon"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
@@ -99,24 +104,19 @@ def plot_silicon(res: dict, path: str):
         if key[1].startswith("Si at"):
             continue  # within 1.5 nm of the 3.9 + 0.02i rows (the table has both)
         g = [r for r in si["fits"] if fit_key(r) == key]
-        axes[1].plot([r["thickness_nm"] for r in g], [r["bias_nm"] for r in g], "o-", ms=3,
+        axes[1].plot([r["thickness_nm"] for r in g], [r["bias_nm"] for r in g], "o", ms=3,
                      ls="-" if key[3] == "thickness" else ":",
                      label=f"model {key[0]} on {key[1]}; data: {key[2]}; free: {key[3]}")
     axes[1].axhline(0.0, color="k", lw=0.5)
     axes[1].set(xlabel="true SiO₂ thickness (nm)", ylabel="fitted − true (nm)",
                 title="fit_spectrum with constant indices, dispersive data")
     axes[1].legend(fontsize=6)
-    fig.tight_layout()
     _save(fig, path)
-    plt.close(fig)
 
 
 def plot_realtime(res: dict, path: str):
     """Mean ΔE₀₀ per material and method: dispersive (band centroids) vs constant film."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     rt = res["realtime"]
     alphas = rt["alphas"]
@@ -147,6 +147,4 @@ def plot_realtime(res: dict, path: str):
                      f"{rt['constant_at_nm']:.0f} nm), each against its own reference",
                      fontsize=9)
     axes[0, 0].legend(fontsize=7, ncol=4)
-    fig.tight_layout()
     _save(fig, path)
-    plt.close(fig)

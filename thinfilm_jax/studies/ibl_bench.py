@@ -170,16 +170,12 @@ def reference_speedup(env, alphas=(0.05, 0.25, 0.6), resolution=8, repeats=3, ve
                                   method="reference", observer="stiles_burch_1959_10",
                                   cross_band=True, arithmetic="complex", one_film=True,
                                   exhaustive=exhaustive)
-        first, warm, out = {}, {True: [], False: []}, {}
+        first, out = {}, {}
         for ex in (True, False):
             t0 = time.perf_counter()
-            jax.block_until_ready(call(ex))
+            out[ex] = np.asarray(jax.block_until_ready(call(ex)))
             first[ex] = time.perf_counter() - t0
-        for _ in range(repeats):
-            for ex in (True, False):
-                t0 = time.perf_counter()
-                out[ex] = np.asarray(jax.block_until_ready(call(ex)))
-                warm[ex].append(time.perf_counter() - t0)
+        warm, _ = time_interleaved({ex: (call, (ex,)) for ex in (True, False)}, repeats)
         scale = np.abs(out[True]).max(axis=0)
         diff = float((np.abs(out[False] - out[True]).max(axis=0) / scale).max())
         for ex, name in ((True, "exhaustive"), (False, "adaptive")):

@@ -36,6 +36,7 @@ from ..spectral.lut import ShatLUT, carrier_parts, read_parts
 from ..spectral.spectra import sensitivity_ft, shat_at_zero
 
 SHAT_SOURCES = ("exact", "lut", "gaussian")
+UNROLLED_READS = ("cubic", "linear_mu")  # ≥ 8 taps: one loop for all orders (`_read_orders`)
 
 
 def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, terms: int = 2,
@@ -54,7 +55,8 @@ def filtered_bands(film: Film, cos_mean, opd: OPDMoments, observer: str, *, term
     kernel's loop; one read of J·K bands per tap does not fuse and moves ~8× the bytes);
     `lut` may then be the table already split per channel (`split_by_light`).
 
-    `interpolation` is the LUT read (`lut.lookup`) when shat="lut". With ``opd.std=None``
+    `interpolation` is the LUT read (`lut.lookup`: "cubic", "linear_mu" or "linear") when
+    shat="lut". With ``opd.std=None``
     the path is known to be exact (σ_D = 0, the `ideal` kernel): the LUT is read at σ = 0
     only."""
     if shat == "lut":
@@ -112,8 +114,9 @@ def _read_orders(ft, s0, terms, opd, lut, interpolation, channel=None):
     carried), which XLA compiles into one loop per order: unrolled, two such reads (and the
     K bins of `improved`) fuse into one loop that XLA's CPU backend compiles to slow code
     (`ideal_kernel` 1.7× slower, `improved_kernel` 3×: figures/kernel_bench.md). The 16-tap
-    bicubic reads are unrolled: one loop of both orders is as fast as two, or faster (under a
-    map's light); there the carrier of order m is the m-th power of order 1's,
+    bicubic and 8-tap "linear_mu" reads are unrolled: one loop of both orders is as fast as
+    two, or faster (under a map's light; the 8-tap read in the scan loop cost 1.3× the
+    unrolled 16-tap one); there the carrier of order m is the m-th power of order 1's,
     e^{−2πi mμ ν̄_j} = (e^{−2πi μ ν̄_j})^m, one `sincos_turns` per band instead of M
     (equal to rounding). The same sum either way. `ft`: `series.fused_terms` at the mean
     cosine; `channel`: light channel (k, K) of a cross-band `lut` (`lut.read_parts`)."""
@@ -135,7 +138,7 @@ def _read_orders(ft, s0, terms, opd, lut, interpolation, channel=None):
 
     one, zero = jnp.ones(shape, c0.dtype), jnp.zeros(shape, c0.dtype)
     carry = (out, (one, one), (zero, zero))
-    if interpolation == "cubic" and std is not None:
+    if interpolation in UNROLLED_READS and std is not None:
         first = carrier_parts(lut, mean, channel)
         car = first
         for m in range(1, terms + 1):

@@ -87,7 +87,8 @@ def ideal_kernel(film: Film, cos_o, *, observer=DEFAULT_OBSERVER, terms: int = 2
 
 def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, terms: int = 2,
                     shat: str = "lut", lut: ShatLUT | None = None,
-                    arithmetic: str = "complex", light: Array | None = None) -> Array:
+                    arithmetic: str = "complex", light: Array | None = None,
+                    interpolation: str = "cubic") -> Array:
     """K 29 band reflectance from light-direction moments, shape (..., J).
 
     Args:
@@ -98,12 +99,14 @@ def filtered_kernel(film: Film, wo, mean, cov, *, observer=DEFAULT_OBSERVER, ter
         shat: "lut" (needs `lut`), "exact" (SPEC §5 quadrature) or "gaussian" (closed form).
         light: (..., 3) RGB radiance with a cross-band observer and shat="lut": returns
             Σ_k R_jk light_k (..., J) (`filtered.filtered_bands`), the table read per channel.
+        interpolation: the LUT read with shat="lut" (`lut.lookup`): "cubic" (16 taps), or
+            "linear_mu" (8 taps, what `envmap_radiance` reads at frame size) or "linear".
     """
     mu_c, var_c = project_light_moments(wo, mean, cov)
     opd = taylor_opd_moments(film, mu_c, var_c)
     cos_star = cos_incidence_from_projection(mu_c)
     return filtered_bands(film, cos_star, opd, observer, terms=terms, shat=shat, lut=lut,
-                          arithmetic=arithmetic, light=light)
+                          arithmetic=arithmetic, light=light, interpolation=interpolation)
 
 
 @functools.partial(jax.jit, static_argnames=("quadrature", "ndf"))

@@ -357,7 +357,7 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     bilinear read), so a constant environment gives Δc = 0, the uniform-light model.
     Per-channel moments are combined weighted by each channel's luminance. cos_o = ⟨n, ω_o⟩
     > 0; `spread`: the bins' s_k (..., K) (`improved.lookup_bins`, which the caller reads)."""
-    dirn, sqa = lookup_reads(table, normal, view, cos_o, alpha)  # (..., K, 3), (..., K)
+    dirn, sqa, view_cos = lookup_reads(table, normal, view, cos_o, alpha, view_cosines=True)
     dirn, sqa = jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa, -1, 0)
     rad, mean = _read_levels(pref, (pref.radiance, pref.moments[..., :3]), dirn, sqa)
     if pref.per_channel:  # (K, ..., 3 channels, 3): weight by each channel's luminance
@@ -375,7 +375,7 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     def dot(a, b):
         return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
-    x_uniform = m1 * dot(view, dirn)
+    x_uniform = m1 * jnp.moveaxis(view_cos, -1, 0)
     dx = dot(view, mean) - x_uniform  # what the light moves ⟨ω_o, E ω_i⟩ by
     dx = jnp.sign(dx) * jnp.maximum(jnp.abs(dx) - MOMENT_RESOLUTION, 0.0)
     lim = 3.0**0.5 * jnp.moveaxis(spread, -1, 0)

@@ -142,8 +142,8 @@ def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic", cha
     wrap is emitted per tap), the taps weighted on real parts (no contraction), the carrier
     e^{−2πi a ν̄_j} by `airy.sincos_turns`.
     ``sigma=None`` means σ = 0 exactly: the σ stencil's weights are then (0, 1, 0, 0)
-    (cubic, linear_mu) or (1, 0) (linear), so only the σ = 0 column is read (the same value, 4× fewer
-    taps). 0 beyond μ_max; σ clamped at σ_max.
+    (cubic, linear_mu) or (1, 0) (linear), so only the σ = 0 column is read (the same value,
+    4× fewer taps). 0 beyond μ_max; σ clamped at σ_max.
 
     `channel` = (k, K): read the bands j·K + k (j = 0 … J/K − 1) of a cross-band table
     (light channel k of K, `uplift`) in place: each tap's row of J bands is gathered and

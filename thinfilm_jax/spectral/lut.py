@@ -133,6 +133,10 @@ def build_shat_lut(observer: str | Observer = DEFAULT_OBSERVER, *, d_mu: float =
                    jnp.asarray(mmax, dtype), jnp.asarray(smax, dtype))
 
 
+# the reads of the table: (cubic in |μ|, cubic in σ); cubic is Catmull–Rom, else linear
+READS = {"cubic": (True, True), "linear_mu": (False, True), "linear": (False, False)}
+
+
 def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic", channel=None,
                carrier=None):
     """(Re, Im) of Ŝ_j(+a, σ²) for a ≥ 0, each of shape broadcast(a, sigma) + (J,), real.
@@ -173,21 +177,18 @@ def read_parts(lut: ShatLUT, a, sigma=None, *, interpolation: str = "cubic", cha
     def lift(w):  # per-point weights against the band axis
         return w[..., None]
 
-    if interpolation == "cubic":
-        wm = [lift(w) for w in _catmull_rom(um)]
-        ws = [lift(w) for w in _catmull_rom(us)] if sigma is not None else None
-        rows, col_off = range(4), (range(4) if sigma is not None else (1,))
-    elif interpolation == "linear_mu":
-        wm = [lift(1.0 - um), lift(um)]
-        ws = [lift(w) for w in _catmull_rom(us)] if sigma is not None else None
-        rows, col_off = (1, 2), (range(4) if sigma is not None else (1,))
-    elif interpolation == "linear":
-        wm = [lift(1.0 - um), lift(um)]
-        ws = [lift(1.0 - us), lift(us)] if sigma is not None else None
-        rows, col_off = (1, 2), ((1, 2) if sigma is not None else (1,))
-    else:
-        raise ValueError(f"unknown interpolation {interpolation!r}; expected 'cubic', "
-                         f"'linear_mu' or 'linear'")
+    if interpolation not in READS:
+        raise ValueError(f"unknown interpolation {interpolation!r}; expected one of "
+                         f"{sorted(READS)}")
+    cubic_mu, cubic_sigma = READS[interpolation]
+
+    def stencil(f, cubic):  # (offsets from the cell's row −1, weights) along one axis
+        if cubic:
+            return range(4), [lift(w) for w in _catmull_rom(f)]
+        return (1, 2), [lift(1.0 - f), lift(f)]
+
+    rows, wm = stencil(um, cubic_mu)
+    col_off, ws = stencil(us, cubic_sigma) if sigma is not None else ((1,), None)
     er = ei = None
     for k, i in enumerate(rows):
         rr = ri = None

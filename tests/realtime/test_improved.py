@@ -250,16 +250,14 @@ def test_read_view_cosines_are_the_dot_products():
     equals the dot product of the view with the read directions, at random normals and
     views, normal view and grazing included (float64 rounding); a sign slip in the closed
     form (+ h sin²θ_o) is off by up to 2 h sin²θ_o ≈ 0.1."""
+    from _geometry import front_facing
     from thinfilm_jax.realtime.improved import lookup_reads
 
     tab = bin_table(shape=(16, 9), quadrature=(24, 24))
     rng = np.random.default_rng(3)
-    n = rng.normal(size=(300, 3))
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    v = rng.normal(size=(300, 3))
-    v /= np.linalg.norm(v, axis=-1, keepdims=True)
-    v = np.where(np.sum(n * v, -1, keepdims=True) < 0, -v, v)
-    v[0], v[1] = n[0], np.cross(n[1], [1.0, 0.0, 0.0]) / np.linalg.norm(np.cross(n[1], [1.0, 0, 0]))
+    n, v = front_facing(rng, 300)
+    side = np.cross(n[1], [1.0, 0.0, 0.0])
+    v[0], v[1] = n[0], side / np.linalg.norm(side)  # normal view; grazing (θ_o = 90°)
     cos_o = np.sum(n * v, -1)
     alpha = rng.uniform(0.02, 1.0, 300)
     dirn, _, vc = lookup_reads(tab, jnp.asarray(n), jnp.asarray(v), jnp.asarray(cos_o),

@@ -71,12 +71,9 @@ def test_full_rank_reproduces_the_3d_table(sky_table):
     assert np.abs(np.einsum("hwrc,vrc->hwvc", us, vs) - np.asarray(sky_table.full)).max() < 1e-12
     full = ColourTable(jnp.asarray(us), jnp.asarray(vs), sky_table.full, sky_table.brightness,
                        sky_table.albedo, material=sky_table.material, envmap=sky_table.envmap)
-    rng = np.random.default_rng(0)
-    n = rng.normal(size=(32, 3))
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    v = rng.normal(size=(32, 3))
-    v /= np.linalg.norm(v, axis=-1, keepdims=True)
-    v = np.where(np.sum(v * n, -1, keepdims=True) < 0, -v, v)
+    from _geometry import front_facing
+
+    n, v = front_facing(np.random.default_rng(0), 32)
     a = colour_table_radiance(full, n, v, rank=0)
     b = colour_table_radiance(full, n, v, rank=None)
     assert np.abs(np.asarray(a - b)).max() < 1e-12

@@ -487,9 +487,10 @@ def lookup_bins(table: BinTable, cos_o, alpha):
 
 
 def _plane_cos(h, cos_o):
-    """cos β of `_plane_directions` from h = sin β / sin θ_o: √(1 − h² sin²θ_o)."""
+    """(cos β, sin²θ_o) of `_plane_directions` from h = sin β / sin θ_o:
+    cos β = √(1 − h² sin²θ_o)."""
     sin2_o = jnp.clip(1.0 - cos_o * cos_o, 0.0, 1.0)[..., None]
-    return safe_sqrt(jnp.clip(1.0 - h * h * sin2_o, 0.0, 1.0))
+    return safe_sqrt(jnp.clip(1.0 - h * h * sin2_o, 0.0, 1.0)), sin2_o
 
 
 def _plane_directions(st, normal, view, cos_o):
@@ -497,7 +498,7 @@ def _plane_directions(st, normal, view, cos_o):
     of n and ω_r, towards ω_r; smooth at normal view. Without gradient where d = ±z (the
     equirect lookup's (φ, θ) have none at the poles: arctan2(0, 0))."""
     tangent = cos_o[..., None] * normal - view  # (sin θ_o) ê = ω_r − cos θ_o n
-    cos_b = _plane_cos(st, cos_o)
+    cos_b, _ = _plane_cos(st, cos_o)
     d = cos_b[..., None] * normal[..., None, :] + st[..., None] * tangent[..., None, :]
     pole = (d[..., 0] == 0) & (d[..., 1] == 0)
     return jnp.where(pole[..., None], jax.lax.stop_gradient(d), d)
@@ -527,8 +528,8 @@ def lookup_reads(table: BinTable, normal, view, cos_o, alpha, *, view_cosines: b
     out = _plane_directions(h, normal, view, cos_o), st[..., 1, :]
     if not view_cosines:
         return out
-    sin2_o = jnp.clip(1.0 - cos_o * cos_o, 0.0, 1.0)[..., None]
-    return out + (_plane_cos(h, cos_o) * cos_o[..., None] - h * sin2_o,)
+    cos_b, sin2_o = _plane_cos(h, cos_o)
+    return out + (cos_b * cos_o[..., None] - h * sin2_o,)
 
 
 class BinLight(NamedTuple):

@@ -7,11 +7,11 @@ that folder (its last cell); the tests assert physics on it, not snapshots.
 """
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _notebook import execute
 
 ROOT = Path(__file__).resolve().parent.parent
 NB_DIR = ROOT / "notebooks"
@@ -21,20 +21,8 @@ def run_notebook(name: str, tmp_path, env: dict[str, str]):
     """Execute notebooks/`name` in `tmp_path` with `env` set (raises on the first failing
     cell); returns the executed notebook."""
     nbformat = pytest.importorskip("nbformat")
-    nbclient = pytest.importorskip("nbclient")
     nb = nbformat.read(NB_DIR / name, as_version=4)
-    old = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        nbclient.NotebookClient(nb, timeout=900, kernel_name="python3",
-                                resources={"metadata": {"path": str(tmp_path)}}).execute()
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-    return nb
+    return execute(nb, cwd=tmp_path, env=env, timeout=900)
 
 
 @pytest.mark.slow

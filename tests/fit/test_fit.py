@@ -8,7 +8,6 @@ dominates the run time: the fits below share configurations where they can (same
 """
 
 import json
-import os
 import warnings
 from pathlib import Path
 
@@ -421,18 +420,9 @@ def test_cli_bad_paths(tmp_path):
 def test_fitting_notebook_executes():
     """notebooks/fitting.ipynb runs end to end (small size via THINFILM_FIT_NOTEBOOK_SMALL)."""
     nbformat = pytest.importorskip("nbformat")
-    nbclient = pytest.importorskip("nbclient")
+    from _notebook import execute
     path = Path(__file__).resolve().parents[2] / "notebooks" / "fitting.ipynb"
     nb = nbformat.read(path, as_version=4)
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), \
         "commit the notebook with outputs stripped"
-    env_before = os.environ.get("THINFILM_FIT_NOTEBOOK_SMALL")
-    os.environ["THINFILM_FIT_NOTEBOOK_SMALL"] = "1"
-    try:
-        nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
-                                resources={"metadata": {"path": str(path.parent)}}).execute()
-    finally:
-        if env_before is None:
-            os.environ.pop("THINFILM_FIT_NOTEBOOK_SMALL", None)
-        else:
-            os.environ["THINFILM_FIT_NOTEBOOK_SMALL"] = env_before
+    execute(nb, cwd=path.parent, env={"THINFILM_FIT_NOTEBOOK_SMALL": "1"}, timeout=600)

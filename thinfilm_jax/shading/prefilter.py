@@ -263,8 +263,9 @@ def _level_lerp(pref: PrefilteredEnvMap, sqrt_alpha):
     return i0.astype(jnp.int32), t - i0
 
 
-def _read_levels(pref: PrefilteredEnvMap, tables, direction, sqrt_alpha):
-    """Each of `tables` (L, h, w, ...) bilinear in direction, linear in √α between levels.
+def _read_levels(pref: PrefilteredEnvMap, tables, direction, sqrt_alpha, channels=None):
+    """Each of `tables` (L, h, w, ...) bilinear in direction, linear in √α between levels;
+    `channels`: per table, the index of the last axis to read (`envmap.read_taps`).
 
     The texels and weights in direction (`envmap.bilinear_taps`, two arctangents) are found
     once for all tables and both levels; the two levels are the two steps of a `lax.scan`,
@@ -276,14 +277,16 @@ def _read_levels(pref: PrefilteredEnvMap, tables, direction, sqrt_alpha):
     h, w = tables[0].shape[1:3]
     taps = bilinear_taps(direction, h, w)
     shape = jnp.broadcast_shapes(direction.shape[:-1], f.shape)
+    channels = (slice(None),) * len(tables) if channels is None else channels
 
     def level(acc, step):  # step 0: level i0 with weight 1 − f; step 1: i0 + 1 with f
         wgt = jnp.where(step == 0, 1 - f, f)
-        reads = (read_taps(t, i0 + step, taps) for t in tables)
+        reads = (read_taps(t, i0 + step, taps, c) for t, c in zip(tables, channels))
         return tuple(a + r * wgt.reshape(wgt.shape + (1,) * (r.ndim - wgt.ndim))
                      for a, r in zip(acc, reads)), None
 
-    acc = tuple(jnp.zeros(shape + t.shape[3:], jnp.result_type(t, f)) for t in tables)
+    acc = tuple(jnp.zeros(shape + np.empty(t.shape[3:])[..., c].shape, jnp.result_type(t, f))
+                for t, c in zip(tables, channels))
     return jax.lax.scan(level, acc, jnp.arange(2, dtype=jnp.int32))[0]
 
 
@@ -359,7 +362,8 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     > 0; `spread`: the bins' s_k (..., K) (`improved.lookup_bins`, which the caller reads)."""
     dirn, sqa, view_cos = lookup_reads(table, normal, view, cos_o, alpha, view_cosines=True)
     dirn, sqa = jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa, -1, 0)
-    rad, mean = _read_levels(pref, (pref.radiance, pref.moments[..., :3]), dirn, sqa)
+    rad, mean = _read_levels(pref, (pref.radiance, pref.moments), dirn, sqa,
+                             channels=(slice(None), slice(0, 3)))
     if pref.per_channel:  # (K, ..., 3 channels, 3): weight by each channel's luminance
         y = rad * jnp.asarray(luminance_weights(), rad.dtype)
         y_sum = jnp.sum(y, axis=-1, keepdims=True)

@@ -488,8 +488,9 @@ def _bins_markdown():
 def _bins_cost():
     ns = artifact("improved_bins.json")["cost"]["ns_per_point"]
     f = ns["filtered"]
-    return [ns["ideal"], f] + [x for k in (2, 3, 4) for x in (
-        ns[f"improved K={k}"], ns[f"improved K={k}"] / f)]
+    return [ns["ideal"], f] + [x for k in ("K=2", "K=3", "K=4", "K=3 + spread") for x in (
+        ns[f"improved {k}"], ns[f"improved {k}"] / f)] + [
+        ns["improved K=3 + spread"] / ns["improved K=3"]]
 
 
 def _small_sources_markdown():
@@ -835,7 +836,8 @@ SPECS = [
     Verbatim("| set | map | render | filtered | K=2 |", ("improved_bins.json",), _bins_markdown),
     Sentence(r"minimum of 5 interleaved rounds\): ideal (\S+) ns, filtered (\S+) ns, "
              r"improved K = 2 (\S+) ns\s+\((\S+)× filtered\), K = 3 (\S+) ns \((\S+)×\), "
-             r"K = 4 (\S+) ns \((\S+)×\)", ("improved_bins.json",), _bins_cost),
+             r"K = 4 (\S+) ns \((\S+)×\),\s+K = 3 with `light_spread` (\S+) ns \((\S+)×; (\S+)× "
+             r"K = 3\)", ("improved_bins.json",), _bins_cost),
     Verbatim("| set | map | render | filtered | improved (before) |", ("small_sources.json",),
              _small_sources_markdown),
     Verbatim("| case | median \\|err\\| nm | p95 nm |", ("photo_study.json",), _photo_markdown),

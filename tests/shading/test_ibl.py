@@ -118,6 +118,54 @@ def test_constant_environment_reproduces_patch(alpha, constant):
         assert np.abs(got - want).max() < tol, (method, np.abs(got - want).max())
 
 
+def test_light_spread_is_the_uniform_model_under_constant_light(constant):
+    """`ModelOptions(light_spread=True)` scales each bin's spread by the ratio of its read's
+    light-weighted variance of x = ⟨ω_o, ω_i⟩ to the kernel's, ½(1 − m₂) + ½(3m₂ − 1)x_d² −
+    m₁²x_d² (`prefilter.bin_radiance_parts`). Under L ≡ 1 the prefiltered second moments
+    give that variance to within 5.4e-4 (measured here; 7.2e-4 over 4,000 points; the
+    tolerance `VARIANCE_RESOLUTION` is 1e-3), so every spread is the uniform-light s_k
+    exactly (without the tolerance they move) and the radiance is the option's absence to
+    rounding (asserted 1e-12). A single bright disc on a black map narrows the spreads of
+    the reads that see it (measured ratios 0.17–0.25 of s_k at a point whose mirror
+    direction is the disc; asserted < 0.5)."""
+    from thinfilm_jax.realtime.improved import bin_table, lookup_bins
+    from thinfilm_jax.shading.prefilter import bin_radiance_parts
+
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(400, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    v = rng.normal(size=(400, 3))
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    v = np.where(np.sum(n * v, -1, keepdims=True) < 0, -v, v)
+    co = np.sum(n * v, -1)
+    alpha = rng.uniform(0.05, 0.5, size=400)
+    tab = bin_table()
+    _, sb = lookup_bins(tab, co, alpha)
+    light = bin_radiance_parts(constant[1], tab, n, v, co, alpha, sb, light_spread=True)
+    np.testing.assert_array_equal(np.asarray(light.spread), np.moveaxis(np.asarray(sb), -1, 0))
+    theta = np.array([0.0, 0.6, 1.1, 1.4])
+    views = view_at(theta, phi=0.3)
+    for alpha in (0.1, 0.25):
+        on, off = (np.asarray(envmap_radiance(FILM, alpha, Z, views, constant[1],
+                                              method="improved",
+                                              options=ModelOptions(shat="lut", light_spread=s)))
+                   for s in (True, False))
+        assert np.abs(on - off).max() < 1e-12
+    # one bright disc, seen in the mirror direction of a point at θ_o = 45°
+    img = np.full((64, 128, 3), 1e-3)
+    img[15:17, 0:2] = 1e3  # near θ = 45°, φ = 0
+    pref = prefilter_envmap(load_envmap(img), sources=0)
+    th = np.pi / 4 - 1e-3
+    d = np.array([np.sin(th) * np.cos(0.05), np.sin(th) * np.sin(0.05), np.cos(th)])
+    nz = np.array([[0.0, 0.0, 1.0]])
+    vv = (2 * d[2] * nz[0] - d)[None]  # ω_o with mirror direction d about n = z
+    cos_o = np.sum(nz * vv, -1)
+    _, s1 = lookup_bins(tab, cos_o, 0.1)
+    lit = bin_radiance_parts(pref, tab, nz, vv, cos_o, 0.1, s1, light_spread=True)
+    ratio = np.asarray(lit.spread) / np.moveaxis(np.asarray(s1), -1, 0)
+    assert ratio.max() < 0.5, ratio
+
+
 def test_reference_converged_by_refinement(forest):
     """SPEC §9: band error ≤ 1e-3 of the band's largest value; doubling s and n_cos moves
     the result by far less.
@@ -392,7 +440,8 @@ def test_float32_realtime_close_to_float64(forest_pref):
 
 # ----------------------------------------------------------------------------- gradients
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
-@pytest.mark.parametrize("method", ["reference", "filtered", "improved"])
+@pytest.mark.parametrize("method", ["reference", "filtered", "improved",
+                                    "improved, light_spread"])
 def test_gradients_finite(method, dtype):
     env = load_envmap(downsample(load_envmap("venice_sunset"), 8).radiance)
     pref = prefilter_envmap(env) if method != "reference" else env
@@ -400,10 +449,13 @@ def test_gradients_finite(method, dtype):
         pref = pref.astype(jnp.float32)
     v = view_at(np.array([0.0, 0.8, 1.45]), phi=1.0).astype(dtype)
     z = Z.astype(dtype)
+    opts = ModelOptions(light_spread=method.endswith("light_spread"))
+    method = method.split(",")[0]
 
     def loss(d, eta, a):
         f = Film(d, eta, dtype(2.0), dtype(0.5))
-        return jnp.sum(envmap_radiance(f, a, z, v, pref, method=method, subdivisions=1))
+        return jnp.sum(envmap_radiance(f, a, z, v, pref, method=method, subdivisions=1,
+                                       options=opts))
 
     args = (dtype(500.0), dtype(1.4), dtype(0.3))
     g = jax.grad(loss, argnums=(0, 1, 2))(*args)
@@ -563,3 +615,6 @@ def test_improved_bins_option(constant):
     assert np.abs(want - three).max() > 1e-3
     with pytest.raises(ValueError, match="bins"):
         patch_radiance(FILM, theta, 0.25, method="improved", options=ModelOptions(bins=0))
+    with pytest.raises(ValueError, match="light_spread"):
+        envmap_radiance(FILM, 0.25, Z, v, constant[1], method="improved",
+                        options=ModelOptions(shat="lut", light_spread="yes"))

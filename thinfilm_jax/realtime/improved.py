@@ -82,6 +82,11 @@ neglect: a bright texel shows the film at its own incidence cosine. Uniform ligh
 asserted 1.2e-4: tests/shading/test_ibl.py). Per point: K reads of the radiance and of the
 first three moment channels, against `filtered`'s one read of 3 + 9 channels.
 
+*The bins' spreads* (``ModelOptions(light_spread=True)``, off by default): each bin's s_k
+scaled by the square root of the ratio of its read's light-weighted variance of ⟨ω_o, ω_i⟩
+(the moments' second-moment channels) to the kernel's own (`BinTable.kernel_moments`), at
+most 2×: 6 % lower mean ΔE₀₀ over the small-sources renders at 1.18× the cost.
+
 Before (`prefilter.bin_radiance`, `studies.small_sources.previous_improved`) each bin read
 its moment-matched part of the lobe at its uniform-light cosine: under maps of many small
 bright sources and no sun (`studies.small_sources`) it lost its advantage over `filtered`
@@ -136,7 +141,7 @@ ALPHA_FLOOR = 1e-4  # quadrature floor of α (the √α = 0 column is the exact 
 #: the reads' fit (`_fit_reads`): (ρ, φ) grid, LM steps, moments matched and their weight;
 #: θ_o (degrees) over which the reads go over to the moment-matched ones (`_fit_reads_host`)
 READ_FIT = dict(grid=(32, 24), iterations=30, moments=2, weight=100.0, grazing=(70.0, 85.0))
-KERNEL_NODES = 257  # √α nodes of the prefilter kernel's mean cosine (`BinTable.kernel_mean`)
+KERNEL_NODES = 257  # √α nodes of the prefilter kernel's moments (`BinTable.kernel_moments`)
 
 
 class BinTable(NamedTuple):
@@ -158,16 +163,18 @@ class BinTable(NamedTuple):
         "improved")`: [0] h = sin β / sin θ_o of each read's direction (as `lobe`), [1] its
         level √α; the K prefilter kernels, weighted 1/K each, are the least-absolute-
         deviation fit of the lobe p_R (`_fit_reads`; the √α = 0 column reads ω_r at level 0).
-    kernel_mean: (KERNEL_NODES,) the mean cosine m₁ = E⟨ω_r, ω_i⟩ of the prefilter's kernel
-        (`prefilter_kernel`) on a uniform grid of √α ∈ [0, 1]: the mean light direction of a
-        read of uniform light is m₁ times its direction.
+    kernel_moments: (2, KERNEL_NODES) the mean cosine m₁ = E⟨ω_r, ω_i⟩ and mean squared
+        cosine m₂ = E⟨ω_r, ω_i⟩² of the prefilter's kernel (`prefilter_kernel`) on a uniform
+        grid of √α ∈ [0, 1]: a read of uniform light in direction d has mean light direction
+        m₁ d and second moment E[ω_i ω_iᵀ] = ½(1 − m₂) I + ½(3m₂ − 1) d dᵀ (the kernel is
+        symmetric about d).
     """
 
     stats: Array
     lobe: Array
     ring: Array
     reads: Array
-    kernel_mean: Array
+    kernel_moments: Array
 
     @property
     def bins(self) -> int:
@@ -222,7 +229,8 @@ def prefilter_kernel(t, alpha):
 
 
 def _kernel_integrals(alpha, nodes: int = 64):
-    r"""(∫ k_α dω, ∫ t k_α dω) by the GGX inverse-CDF variable β (tan θ_h = α tan β): with
+    r"""(∫ k_α dω, ∫ t k_α dω, ∫ t² k_α dω) by the GGX inverse-CDF variable β
+    (tan θ_h = α tan β): with
     n = ω_o, dω_i = 4 cos θ_h dω_h and D cos θ_h dω_h = d(sin²β) dφ/2π, so
     ∫ k_α f dω = ∫₀^{β_max} G₂(t, 1) f(t) d(sin²β), t = cos 2θ_h, β_max = atan(1/α)
     (t = 0): a smooth integrand, Gauss–Legendre in β."""
@@ -233,16 +241,18 @@ def _kernel_integrals(alpha, nodes: int = 64):
     t = (1 - tan_h2) / (1 + tan_h2)
     dw = bmax * w / 2 * jnp.sin(2 * b)  # d(sin²β)
     g = smith_g2(jnp.clip(t, 0.0, 1.0), jnp.ones_like(t), alpha) * dw
-    return jnp.sum(g), jnp.sum(g * t)
+    return jnp.sum(g), jnp.sum(g * t), jnp.sum(g * t * t)
 
 
-def _kernel_mean_host(n: int) -> np.ndarray:
-    """m₁(√α) = ∫ t k_α / ∫ k_α on √α = linspace(0, 1, n) (1 at √α = 0: a mirror read)."""
+def _kernel_moments_host(n: int) -> np.ndarray:
+    """(m₁, m₂)(√α) = (∫ t k_α, ∫ t² k_α) / ∫ k_α on √α = linspace(0, 1, n), shape (2, n)
+    (1 at √α = 0: a mirror read)."""
     sqa = np.linspace(0.0, 1.0, n)
-    z, zt = jax.jit(jax.vmap(_kernel_integrals))(jnp.asarray(np.maximum(sqa**2, ALPHA_FLOOR)))
-    m1 = np.asarray(zt, np.float64) / np.asarray(z, np.float64)
-    m1[0] = 1.0
-    return m1
+    z, zt, zt2 = (np.asarray(x, np.float64) for x in jax.jit(jax.vmap(_kernel_integrals))(
+        jnp.asarray(np.maximum(sqa**2, ALPHA_FLOOR))))
+    m = np.stack([zt / z, zt2 / z])
+    m[:, 0] = 1.0
+    return m
 
 
 def _fit_reads(theta_o, alpha, x0, grid, iterations, moments, weight, ndf):
@@ -322,7 +332,7 @@ def _fit_reads(theta_o, alpha, x0, grid, iterations, moments, weight, ndf):
 
     (x, _), _ = jax.lax.scan(step, (x0, jnp.asarray(1e-2, dt)), None, length=iterations)
     x = x.reshape(k, 2)
-    z, zt = jax.vmap(_kernel_integrals)(jnp.maximum(x[:, 1] ** 2, ALPHA_FLOOR))
+    z, zt, _ = jax.vmap(_kernel_integrals)(jnp.maximum(x[:, 1] ** 2, ALPHA_FLOOR))
     key = (zt / z) * (jax.vmap(direction)(x[:, 0]) @ wo)
     return x[jnp.argsort(key)].reshape(-1)
 
@@ -403,7 +413,7 @@ def _bin_table_host(shape, bins, quadrature, ndf, x64) -> np.ndarray:
     lobe[:, 0, 0], lobe[:, 0, 1] = 1.0, 0.0  # ... and every part is ω_r at level 0
     ring[:, 0] = 0.0
     reads = _fit_reads_host(theta, sqa, lobe, bins, ndf, dt)
-    return stats, lobe, ring, reads, _kernel_mean_host(KERNEL_NODES)
+    return stats, lobe, ring, reads, _kernel_moments_host(KERNEL_NODES)
 
 
 @functools.cache
@@ -534,13 +544,15 @@ def lookup_reads(table: BinTable, normal, view, cos_o, alpha, *, view_cosines: b
 
 class BinLight(NamedTuple):
     """The light of the K bins under an environment (`prefilter.bin_radiance_parts`), bins
-    first: `radiance` (K, ..., 3) read for each bin, and `cos_shift` (K, ...), the shift of
-    each bin's mean c̄_k towards the mean incidence cosine of the light it reads (docs/
-    improved.md). `scan_bins` given a `BinLight` as `extra` evaluates bin k at
-    c̄_k + shift_k (clipped to [0, 1]) and passes its radiance on."""
+    first: `radiance` (K, ..., 3) read for each bin, `cos_shift` (K, ...), the shift of
+    each bin's mean c̄_k towards the mean incidence cosine of the light it reads, and
+    `spread` (K, ...) or None, the bin's spread of c under that light (docs/improved.md).
+    `scan_bins` given a `BinLight` as `extra` evaluates bin k at c̄_k + shift_k (clipped to
+    [0, 1]), with spread_k in place of s_k when given, and passes its radiance on."""
 
     radiance: Array
     cos_shift: Array
+    spread: Array | None = None
 
 
 # ----------------------------------------------------------------------------- kernel
@@ -562,24 +574,27 @@ def scan_bins(film: Film, cos_bins, std_bins, bands, *, extra=None,
 
     `film` broadcasts with the leading axes of `cos_bins`, `std_bins` (..., K); `extra`
     (K, ..., C), bins first, is sliced per bin (e.g. each bin's light); a `BinLight` also
-    moves each bin's mean cosine by its `cos_shift` (the light-weighted bins of
-    `envmap_radiance(method="improved")`) and passes its `radiance` on. XLA compiles each
+    moves each bin's mean cosine by its `cos_shift` and takes its `spread` (if any) for s_k (the
+    light-weighted bins of `envmap_radiance(method="improved")`), and passes its `radiance`
+    on. XLA compiles each
     step into loops of its own: the K bins unrolled fuse into one loop that XLA's CPU backend
     compiles to slow code (`improved_kernel` 3.0× slower, `envmap_radiance(method=
     "improved")` 1.2×: figures/kernel_bench.md), at the same results. A bin axis broadcast
     against the film would be materialised instead."""
     cos_bins, std_bins = jnp.asarray(cos_bins), jnp.asarray(std_bins)
-    shift = None
+    shift = spread = None
     if isinstance(extra, BinLight):
-        shift, extra = extra.cos_shift, extra.radiance
+        shift, spread, extra = extra.cos_shift, extra.spread, extra.radiance
     k = max(cos_bins.shape[-1], std_bins.shape[-1])
     shape = jnp.broadcast_shapes(*(jnp.shape(x) for x in jax.tree.leaves(film)),
                                  cos_bins.shape[:-1], std_bins.shape[:-1],
                                  *(() if extra is None else (jnp.shape(extra)[1:-1],)))
     film = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x), shape), film)
     xs = [jnp.moveaxis(jnp.broadcast_to(x, shape + (k,)), -1, 0) for x in (cos_bins, std_bins)]
-    if shift is not None:  # bins first, as the shift comes (no transposes)
+    if shift is not None:  # bins first, as the shift and spread come (no transposes)
         xs[0] = jnp.clip(xs[0] + shift, 0.0, 1.0)
+    if spread is not None:
+        xs[1] = jnp.broadcast_to(spread, (k,) + shape)
     if extra is not None:
         xs.append(jnp.broadcast_to(extra, (k,) + shape + jnp.shape(extra)[-1:]))
 

@@ -181,7 +181,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     if realtime:
         if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
             raise ValueError("the PrefilteredEnvMap was built for another observer")
-        cfg = (method, observer, terms, shat, bool(cross_band), arithmetic)
+        cfg = (method, observer, terms, shat, bool(cross_band), arithmetic,
+               method == "improved" and options.light_spread)
         if method == "improved":  # its (θ_o, α) tables travel with the map
             pref = (pref, bin_table(options.bins, dtype=dtype))
         return _realtime_jit(film, alpha, *nv, pref, cfg, int(batch_size or 65536))
@@ -362,7 +363,7 @@ def _chunk(xs, pref, cfg):
 
 def _realtime_points(film, alpha, normal, view, pref, cfg):
     """The map's method plus the sources split from it (if any), at flat shading points."""
-    method, observer, terms, shat, cross, arithmetic = cfg
+    method, observer, terms, shat, cross, arithmetic, _ = cfg
     out = _map_points(film, alpha, normal, view, pref, cfg)
     pref = pref[0] if method == "improved" else pref
     if pref.has_sources:
@@ -375,14 +376,14 @@ def _realtime_points(film, alpha, normal, view, pref, cfg):
 
 
 def _map_points(film, alpha, normal, view, pref, cfg):
-    method, observer, terms, shat, cross, arithmetic = cfg
+    method, observer, terms, shat, cross, arithmetic, light_spread = cfg
     if method == "improved":
         pref, table = pref
         lut = pref.lut if cross else (build_shat_lut(observer, dtype=alpha.dtype)
                                       if shat == "lut" else None)
         return improved_envmap(film, alpha, normal, view, pref, table, observer=observer,
                                terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
-                               cross_band=cross)
+                               cross_band=cross, light_spread=light_spread)
     cos_o = jnp.sum(normal * view, axis=-1)
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
@@ -435,7 +436,7 @@ def _map_points(film, alpha, normal, view, pref, cfg):
 def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
                     observer=DEFAULT_OBSERVER, terms: int = 2, shat: str = "lut",
                     lut: ShatLUT | None = None, arithmetic: str = "complex",
-                    cross_band: bool = True) -> Array:
+                    cross_band: bool = True, light_spread: bool = False) -> Array:
     r"""`envmap_radiance(method="improved")` at shading points: L_j (..., J), 0 where ⟨n,ω_o⟩ ≤ 0.
 
     $$ L_j = \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K}\sum_c
@@ -459,13 +460,16 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
         terms, shat, lut, arithmetic: as `improved_bins`; `lut` must hold the bands used
             (the map's cross-band table when `cross_band`).
         cross_band: R_jc under RGB light (SPEC §9) or the diagonal R_j P_j.
+        light_spread: each bin's spread of cos θ₁ follows its read's light too
+            (`prefilter.bin_radiance_parts`; `ModelOptions.light_spread`).
     """
     cos_o = jnp.sum(normal * view, axis=-1)
     up = cos_o > 0
     co = jnp.where(up, cos_o, 1.0)
     a = lookup_albedo(pref, co, safe_sqrt(alpha))
     cb, sb = lookup_bins(table, co, alpha)
-    light = bin_radiance_parts(pref, table, normal, view, co, alpha, sb)  # bins first
+    light = bin_radiance_parts(pref, table, normal, view, co, alpha, sb,
+                               light_spread=light_spread)  # bins first
     obs = cross_band_name(observer) if cross_band else observer
     # Σ_c R_jc P_c: the cross-band table read per light channel in place (`lut.read_parts(
     # channel=...)`); three strided copies (`split_by_light`) made in every chunk cost 8 %

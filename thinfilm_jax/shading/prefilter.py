@@ -63,6 +63,9 @@ MOMENTS = ("luminance", "per_channel")
 #: moves of ⟨ω_o, mean light direction⟩ below this are the prefilter's own error
 #: (`bin_radiance_parts`)
 MOMENT_RESOLUTION = 1e-3
+#: moves of the variance of ⟨ω_o, ω_i⟩ below this are the prefilter's own error
+#: (`bin_radiance_parts`)
+VARIANCE_RESOLUTION = 1e-3
 
 
 class PrefilteredEnvMap(NamedTuple):
@@ -337,54 +340,86 @@ def _incidence_cos(x):
     return safe_sqrt(jnp.clip((1.0 + x) * 0.5, 0.0, 1.0))
 
 
-def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha, spread):
+def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha, spread, *,
+                       light_spread: bool = False):
     r"""The light of the improved model's K bins (docs/improved.md): an `improved.BinLight`
-    (radiance (K, ..., 3) and cosine shifts (K, ...), bins first: the layout
-    `improved.scan_bins` steps through).
+    (radiance (K, ..., 3), cosine shifts and, with `light_spread`, spreads (K, ...), bins
+    first: the layout `improved.scan_bins` steps through).
 
-    Read k is the prefiltered radiance P_k and luminance-weighted mean direction μ_k (the
-    first three moment channels, K §3.2) at the tabulated direction d_k and level α_k
-    (`improved.lookup_reads`: the K kernels fitted to the lobe). Under uniform light the
-    read's mean direction is m₁(α_k) d_k (`BinTable.kernel_mean`, interpolated between the
-    levels as the read is); the light moves it to μ_k, and bin k's mean incidence cosine
-    moves with it,
+    Read k is the prefiltered radiance P_k and the luminance-weighted moments of the light
+    direction, mean μ_k and second moment S_k (K §3.2; S_k only with `light_spread`), at the
+    tabulated direction d_k and level α_k (`improved.lookup_reads`: the K kernels fitted to
+    the lobe). They place bin k's film where the bin's light is, through x = ⟨ω_o, ω_i⟩
+    (c = √((1 + x)/2), K 22). Under uniform light the read's kernel, symmetric about d_k
+    with moments m₁, m₂ of ⟨d_k, ω_i⟩ (`BinTable.kernel_moments`, interpolated between the
+    levels as the read is), gives x the mean and variance
 
-    $$ \Delta c_k = \operatorname{clip}\big(c(\langle\omega_o,\mu_k\rangle)
-       - c(m_1\langle\omega_o, d_k\rangle),\ \pm\sqrt3\,s_k\big),\qquad
-       c(x) = \sqrt{(1 + x)/2}\quad(\text{K 22}), $$
+    $$ \bar x_k = m_1 x_d,\qquad v_k = \tfrac12(1 - m_2) + \tfrac12(3m_2 - 1)\,x_d^2
+       - m_1^2 x_d^2,\qquad x_d = \langle\omega_o, d_k\rangle; $$
 
-    clipped to the bin's width (a uniform bin of spread s_k spans ±√3 s_k). The move of
-    ⟨ω_o, μ_k⟩ is shrunk by `MOMENT_RESOLUTION` (soft threshold), what the prefilter resolves:
-    a constant map's read moments differ from m₁ d_k by ≤ 5.6e-4 (mean 2.4e-4; 64 × 128,
-    17 levels, random directions and levels: the sampled kernel of narrow levels and the
-    bilinear read), so a constant environment gives Δc = 0, the uniform-light model.
-    Per-channel moments are combined weighted by each channel's luminance. cos_o = ⟨n, ω_o⟩
-    > 0; `spread`: the bins' s_k (..., K) (`improved.lookup_bins`, which the caller reads)."""
+    the light moves them to ⟨ω_o, μ_k⟩ and v^L_k = ω_oᵀS_kω_o − ⟨ω_o, μ_k⟩², and the bin
+    follows (the spread only with `light_spread`; else s'_k = s_k):
+
+    $$ \Delta c_k = \operatorname{clip}\big(c(\langle\omega_o,\mu_k\rangle) - c(\bar x_k),
+       \ \pm\sqrt3\,s_k\big),\qquad
+       s'_k = s_k\sqrt{\operatorname{clip}(v^L_k / v_k,\ 0,\ 4)}, $$
+
+    the shift clipped to the bin's width (a uniform bin of spread s_k spans ±√3 s_k), the
+    spread scaled as the read's light narrows or widens x (one bright texel: s' → 0, the film
+    at that texel's cosine; at most twice s_k: wider light belongs to the neighbouring bins,
+    which their own reads carry). The spread reads six more moment channels per read (the
+    second moments): ≈ 1.18× the cost of `improved` a point, for ≈ 6 % lower mean ΔE₀₀ over
+    the small-sources study's 18 renders (docs/studies/improved.md, "Choosing K"). Both
+    moves are shrunk by what the prefilter resolves (soft thresholds): a constant map's
+    read moments differ from the kernel's by ≤ 5.6e-4 in the mean (`MOMENT_RESOLUTION`)
+    and ≤ 7.2e-4 in the variance of x (`VARIANCE_RESOLUTION`;
+    64 × 128, 17 levels, random directions and levels, α = 0.05–0.5: the sampled kernel of
+    narrow levels and the bilinear read), so a constant environment gives Δc = 0 and s' = s,
+    the uniform-light model. Per-channel moments are combined weighted by each channel's
+    luminance. cos_o = ⟨n, ω_o⟩ > 0; `spread`: the bins' s_k (..., K)
+    (`improved.lookup_bins`, which the caller reads)."""
     dirn, sqa, view_cos = lookup_reads(table, normal, view, cos_o, alpha, view_cosines=True)
     dirn, sqa = jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa, -1, 0)
-    rad, mean = _read_levels(pref, (pref.radiance, pref.moments), dirn, sqa,
-                             channels=(slice(None), slice(0, 3)))
-    if pref.per_channel:  # (K, ..., 3 channels, 3): weight by each channel's luminance
+    rad, mom = _read_levels(pref, (pref.radiance, pref.moments), dirn, sqa,
+                            channels=(slice(None), slice(None if light_spread else 3)))
+    if pref.per_channel:  # (K, ..., 3 channels, 3 or 9): weight by each channel's luminance
         y = rad * jnp.asarray(luminance_weights(), rad.dtype)
         y_sum = jnp.sum(y, axis=-1, keepdims=True)
         y = y / jnp.where(y_sum > 0, y_sum, 1.0)
-        mean = jnp.sum(y[..., None] * mean, axis=-2)
-    # uniform light: m₁ of the two levels the read interpolates, with the read's weights
-    n_m = table.kernel_mean.shape[0]
-    m1_levels = jnp.interp(pref.sqrt_alpha, jnp.linspace(0.0, 1.0, n_m, dtype=sqa.dtype),
-                           table.kernel_mean)
+        mom = jnp.sum(y[..., None] * mom, axis=-2)
+    # uniform light: m₁, m₂ of the two levels the read interpolates, with the read's weights
+    n_m = table.kernel_moments.shape[-1]
+    grid = jnp.linspace(0.0, 1.0, n_m, dtype=sqa.dtype)
     i0, f = _level_lerp(pref, sqa)
-    m1 = m1_levels[i0] * (1 - f) + m1_levels[i0 + 1] * f
 
-    def dot(a, b):
-        return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+    def at_read(m):
+        m_levels = jnp.interp(pref.sqrt_alpha, grid, m)
+        return m_levels[i0] * (1 - f) + m_levels[i0 + 1] * f
 
-    x_uniform = m1 * jnp.moveaxis(view_cos, -1, 0)
-    dx = dot(view, mean) - x_uniform  # what the light moves ⟨ω_o, E ω_i⟩ by
-    dx = jnp.sign(dx) * jnp.maximum(jnp.abs(dx) - MOMENT_RESOLUTION, 0.0)
-    lim = 3.0**0.5 * jnp.moveaxis(spread, -1, 0)
+    m1 = at_read(table.kernel_moments[0])
+    x_d = jnp.moveaxis(view_cos, -1, 0)
+    vx, vy, vz = view[..., 0], view[..., 1], view[..., 2]
+    x_light = mom[..., 0] * vx + mom[..., 1] * vy + mom[..., 2] * vz  # ⟨ω_o, μ_k⟩
+    x_uniform = m1 * x_d
+
+    def soft(d, tol):  # a move within the prefilter's resolution is no move
+        return jnp.sign(d) * jnp.maximum(jnp.abs(d) - tol, 0.0)
+
+    dx = soft(x_light - x_uniform, MOMENT_RESOLUTION)
+    s = jnp.moveaxis(spread, -1, 0)
+    lim = 3.0**0.5 * s
     shift = jnp.clip(_incidence_cos(x_uniform + dx) - _incidence_cos(x_uniform), -lim, lim)
-    return BinLight(rad, shift)
+    if not light_spread:
+        return BinLight(rad, shift)
+    m2 = at_read(table.kernel_moments[1])
+    xx, yy, zz, xy, yz, zx = (mom[..., c] for c in range(3, 9))
+    v_light = (xx * vx * vx + yy * vy * vy + zz * vz * vz
+               + 2.0 * (xy * vx * vy + yz * vy * vz + zx * vz * vx)) - x_light * x_light
+    v_uniform = 0.5 * (1.0 - m2) + (0.5 * (3.0 * m2 - 1.0) - m1 * m1) * x_d * x_d
+    dv = soft(v_light - v_uniform, VARIANCE_RESOLUTION)
+    ok = v_uniform > 0
+    ratio = jnp.where(ok, (v_uniform + dv) / jnp.where(ok, v_uniform, 1.0), 1.0)
+    return BinLight(rad, shift, s * safe_sqrt(jnp.clip(ratio, 0.0, 4.0)))
 
 
 def moments_to_mean_cov(m):

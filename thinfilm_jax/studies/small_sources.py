@@ -4,7 +4,8 @@
 writes ``small_sources.json``, ``small_sources.md`` (the tables of docs/studies/improved.md,
 section "Many small sources") and ``small_sources_maps.png`` (the procedural maps);
 ``--bins`` writes ``improved_bins.json`` / ``.md`` instead (`bins_sweep`: every render with
-K = 2, 3, 4 bins and the cost a point of each, section "Choosing K").
+K = 2, 3, 4 bins and with K = 3 and `ModelOptions(light_spread=True)`, and the cost a point
+of each, section "Choosing K").
 
 Maps (equirectangular 512 × 1024 like the 1k Poly Haven maps, built here, fixed seeds):
 `lamps_map` (a dim night sky with hundreds of small lamps of many colours), `facade_map`
@@ -556,13 +557,24 @@ def diagnose(name: str, cfg: Config, verbose=True, nh: int = 2048) -> list[dict]
 
 
 BINS_SWEEP = (2, 3, 4)
+SPREAD_VARIANT = "K=3 + spread"  # the default K with each bin's light-weighted spread
+
+
+def _sweep_options(bins):
+    """{column label: `ModelOptions` of improved} of the bins sweep: each K of `bins`, then
+    K = 3 with `light_spread`."""
+    from ..realtime.options import ModelOptions
+
+    out = {f"K={k}": ModelOptions(shat="lut", bins=k) for k in bins}
+    out[SPREAD_VARIANT] = ModelOptions(shat="lut", bins=3, light_spread=True)
+    return out
 
 
 def bins_cost(bins=BINS_SWEEP, points: int = 2**18, repeats: int = 5, verbose=True) -> dict:
     """ns a shading point of `envmap_radiance` (float32, the wide grid of
     `kernel_bench.shading_points`, prefiltered venice_sunset, jitted whole): ideal, filtered
-    and improved with each K of `bins`, every program once per round, rounds interleaved,
-    minimum of `repeats`."""
+    and improved with each K of `bins` and with K = 3 and `light_spread`, every program once
+    per round, rounds interleaved, minimum of `repeats`."""
     from ..core.film import Film
     from ..realtime.options import ModelOptions
     from ..shading.ibl import envmap_radiance
@@ -574,12 +586,13 @@ def bins_cost(bins=BINS_SWEEP, points: int = 2**18, repeats: int = 5, verbose=Tr
     pref = prefilter_envmap("venice_sunset").astype(F32)
     film = Film(**pts["film"])
     args = (film, pts["alpha"], pts["normal"], pts["wo"], pref)
-    progs = {"ideal": ("ideal", 3), "filtered": ("filtered", 3)}
-    progs.update({f"improved K={k}": ("improved", k) for k in bins})
+    progs = {"ideal": ("ideal", ModelOptions(shat="lut")),
+             "filtered": ("filtered", ModelOptions(shat="lut"))}
+    progs.update({f"improved {k}": ("improved", o) for k, o in _sweep_options(bins).items()})
     calls = {}
-    for name, (method, k) in progs.items():
-        fn = jax.jit(lambda f, a, n, v, p, m=method, k=k: envmap_radiance(
-            f, a, n, v, p, method=m, options=ModelOptions(shat="lut", bins=k)))
+    for name, (method, opts) in progs.items():
+        fn = jax.jit(lambda f, a, n, v, p, m=method, o=opts: envmap_radiance(
+            f, a, n, v, p, method=m, options=o))
         calls[name] = (fn.lower(*args).compile(), args)
         jax.block_until_ready(calls[name][0](*args))
     times, _ = time_interleaved(calls, repeats)
@@ -591,10 +604,10 @@ def bins_cost(bins=BINS_SWEEP, points: int = 2**18, repeats: int = 5, verbose=Tr
 
 
 def bins_sweep(cfg: Config = Config(), bins=BINS_SWEEP, verbose=True) -> dict:
-    """`improved` with each K of `bins` (`ModelOptions(bins=K)`) on every render of the study
-    (dev, held-out and shipped maps): mean ΔE₀₀ and its ratio to `filtered`'s, and the cost a
-    point (`bins_cost`). The table of docs/studies/improved.md, "Choosing K"."""
-    from ..realtime.options import ModelOptions
+    """`improved` with each K of `bins` (`ModelOptions(bins=K)`), and with K = 3 and
+    `light_spread`, on every render of the study (dev, held-out and shipped maps): mean ΔE₀₀
+    and its ratio to `filtered`'s, and the cost a point (`bins_cost`). The table of
+    docs/studies/improved.md, "Choosing K"."""
     from ..shading.ibl import DEFAULT_SOURCES, envmap_radiance
     from ..shading.prefilter import prefilter_envmap
     from ..spectral.colorimetry import delta_e2000
@@ -617,20 +630,20 @@ def bins_sweep(cfg: Config = Config(), bins=BINS_SWEEP, verbose=True) -> dict:
             row = {"set": set_name, "map": name, "render": r.label,
                    "filtered": de(envmap_radiance(film, alpha, pts, wo, pf, method="filtered",
                                                   observer=obs))}
-            for k in bins:
-                row[f"K={k}"] = de(envmap_radiance(film, alpha, pts, wo, pi, method="improved",
-                                                   observer=obs,
-                                                   options=ModelOptions(shat="lut", bins=k)))
+            for k, opts in _sweep_options(bins).items():
+                row[k] = de(envmap_radiance(film, alpha, pts, wo, pi, method="improved",
+                                            observer=obs, options=opts))
             rows.append(row)
             if verbose:
                 print(f"  {name:24s} {row['render']:18s} " + " ".join(
                     f"{k} {v:.2f}" for k, v in row.items() if k == "filtered" or "K=" in k),
                       file=sys.stderr)
-    return {"bins": list(bins), "rows": rows, "cost": bins_cost(bins, verbose=verbose)}
+    return {"bins": list(bins), "variants": list(_sweep_options(bins)), "rows": rows,
+            "cost": bins_cost(bins, verbose=verbose)}
 
 
 def bins_markdown(result) -> str:
-    ks = [f"K={k}" for k in result["bins"]]
+    ks = result.get("variants", [f"K={k}" for k in result["bins"]])
     ns = result["cost"]["ns_per_point"]
     lines = ["## Choosing K: improved with K bins (mean ΔE₀₀, ÷ filtered)", "",
              "| set | map | render | filtered | " + " | ".join(ks) + " |",

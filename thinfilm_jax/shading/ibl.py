@@ -447,8 +447,9 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     lobe's shape (`improved.lookup_reads`), at the bin's mean incidence cosine moved by what
     the read's luminance-weighted mean direction says, Δc_k (`prefilter.bin_radiance_parts`:
     the covariance of R and L inside a bin). A constant environment gives Δc = 0 and the
-    uniform-light model. Per point: K reads of 3 radiance and 3 moment channels, against
-    `filtered`'s one read of 3 + 9 (docs/improved.md).
+    uniform-light model. Per point: K reads of 3 radiance and 3 moment channels (9 with
+    `light_spread`, which also moves each bin's spread), against `filtered`'s one read of
+    3 + 9 (docs/improved.md).
 
     Args:
         film: `Film` broadcasting with the shading points.

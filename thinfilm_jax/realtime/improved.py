@@ -590,11 +590,14 @@ def scan_bins(film: Film, cos_bins, std_bins, bands, *, extra=None,
                                  cos_bins.shape[:-1], std_bins.shape[:-1],
                                  *(() if extra is None else (jnp.shape(extra)[1:-1],)))
     film = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x), shape), film)
-    xs = [jnp.moveaxis(jnp.broadcast_to(x, shape + (k,)), -1, 0) for x in (cos_bins, std_bins)]
-    if shift is not None:  # bins first, as the shift and spread come (no transposes)
+    def bins_first(x):
+        return jnp.moveaxis(jnp.broadcast_to(x, shape + (k,)), -1, 0)
+
+    # a BinLight's shift and spread come bins first (no transposes); the spread replaces s_k
+    xs = [bins_first(cos_bins), bins_first(std_bins) if spread is None
+          else jnp.broadcast_to(spread, (k,) + shape)]
+    if shift is not None:
         xs[0] = jnp.clip(xs[0] + shift, 0.0, 1.0)
-    if spread is not None:
-        xs[1] = jnp.broadcast_to(spread, (k,) + shape)
     if extra is not None:
         xs.append(jnp.broadcast_to(extra, (k,) + shape + jnp.shape(extra)[-1:]))
 

@@ -618,3 +618,7 @@ def test_improved_bins_option(constant):
     with pytest.raises(ValueError, match="light_spread"):
         envmap_radiance(FILM, 0.25, Z, v, constant[1], method="improved",
                         options=ModelOptions(shat="lut", light_spread="yes"))
+    for bad in (0, 1.5, "2"):
+        with pytest.raises(ValueError, match="bin_reads"):
+            envmap_radiance(FILM, 0.25, Z, v, constant[1], method="improved",
+                            options=ModelOptions(shat="lut", bin_reads=bad))

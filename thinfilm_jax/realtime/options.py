@@ -15,6 +15,7 @@ library's: each name means one thing everywhere.
 | ``layer`` | "auto" · "film" · "bare" | "bare": no film (d = 0), the outer|base Fresnel only |
 | ``bins`` | int ≥ 1 (3) | K, the equal-probability bins of cos θ₁ of `method="improved"` |
 | ``light_spread`` | bool (False) | `improved` under a map: bins' spreads follow the light |
+| ``bin_reads`` | int ≥ 1 (1) | `improved` under a map: prefiltered reads per bin |
 
 ``arithmetic="auto"`` picks the real (dielectric) path when the concrete film allows it
 (κ₃ = 0, η₂, η₃ ≥ η₁) and the complex one otherwise or under `jit`, where the caller forces
@@ -32,6 +33,12 @@ default) ≈ 2.3× and K = 4 ≈ 2.9×, with the error falling as K grows. Each 
 from the prefiltered second moments (`prefilter.bin_radiance_parts`): ≈ 1.18× the cost of
 `improved` under a map for ≈ 6 % lower mean ΔE₀₀ over the small-sources study's renders
 (docs/studies/improved.md, "Choosing K"); under uniform light it changes nothing.
+``bin_reads=g`` gives each of `improved`'s K bins g prefiltered reads instead of one (the
+g·K kernels fitted to the lobe, `improved.bin_table(reads=g)`; `prefilter.bin_radiance_parts`
+pools them): narrower kernels that follow each bin's part of the lobe, for maps of many
+small bright sources. It costs ≈ 55 ns a read a point on a 2-core CPU (g = 3: ≈ 2× the
+default); its measured errors are in docs/studies/improved.md, "Choosing K". Under uniform
+light it changes nothing.
 
 Example:
     >>> from thinfilm_jax import ModelOptions
@@ -63,6 +70,7 @@ class ModelOptions(NamedTuple):
     layer: str = "auto"
     bins: int = DEFAULT_BINS
     light_spread: bool = False
+    bin_reads: int = 1
 
     def checked(self) -> ModelOptions:
         """The same options validated (ValueError naming the field) and normalised."""
@@ -74,7 +82,8 @@ class ModelOptions(NamedTuple):
             raise ValueError(f"light_spread must be True or False, got {self.light_spread!r}")
         return self._replace(terms=V.check_int("terms", self.terms, 0),
                              quadrature=V.check_quadrature(self.quadrature),
-                             bins=V.check_int("bins", self.bins, 1))
+                             bins=V.check_int("bins", self.bins, 1),
+                             bin_reads=V.check_int("bin_reads", self.bin_reads, 1))
 
 
 def check_options(options) -> ModelOptions:

@@ -184,7 +184,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         cfg = (method, observer, terms, shat, bool(cross_band), arithmetic,
                method == "improved" and options.light_spread)
         if method == "improved":  # its (θ_o, α) tables travel with the map
-            pref = (pref, bin_table(options.bins, dtype=dtype))
+            pref = (pref, bin_table(options.bins, reads=options.bin_reads, dtype=dtype))
         return _realtime_jit(film, alpha, *nv, pref, cfg, int(batch_size or 65536))
     return exact_radiance(film, alpha, *nv, env, method=method, observer=observer,
                           cross_band=bool(cross_band), arithmetic=arithmetic,
@@ -449,7 +449,8 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     the covariance of R and L inside a bin). A constant environment gives Δc = 0 and the
     uniform-light model. Per point: K reads of 3 radiance and 3 moment channels (9 with
     `light_spread`, which also moves each bin's spread), against `filtered`'s one read of
-    3 + 9 (docs/improved.md).
+    3 + 9 (docs/improved.md); g·K reads when `table` has g reads a bin
+    (`bin_table(reads=g)`, `ModelOptions.bin_reads`), pooled per bin.
 
     Args:
         film: `Film` broadcasting with the shading points.

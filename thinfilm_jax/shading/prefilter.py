@@ -377,16 +377,24 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     narrow levels and the bilinear read), so a constant environment gives Δc = 0 and s' = s,
     the uniform-light model. Per-channel moments are combined weighted by each channel's
     luminance. cos_o = ⟨n, ω_o⟩ > 0; `spread`: the bins' s_k (..., K)
-    (`improved.lookup_bins`, which the caller reads)."""
+    (`improved.lookup_bins`, which the caller reads).
+
+    With g reads a bin (a table of ``bin_table(reads=g)``: R = g·K reads, sorted by their
+    incidence cosine, bin k served by reads gk … gk + g − 1; `ModelOptions.bin_reads`) the
+    bin's light is their pool: P_k the mean of their radiances, μ_k and S_k the
+    luminance-weighted means of their moments (each read's light is its kernel's share of
+    the bin), and the uniform-light x̄_k, v_k those of the g kernels pooled, i.e. the mean of
+    m₁x_d and of E[x²] less the pooled mean squared; g = 1 is the formulas above."""
     dirn, sqa, view_cos = lookup_reads(table, normal, view, cos_o, alpha, view_cosines=True)
     dirn, sqa = jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa, -1, 0)
     rad, mom = _read_levels(pref, (pref.radiance, pref.moments), dirn, sqa,
                             channels=(slice(None), slice(None if light_spread else 3)))
-    if pref.per_channel:  # (K, ..., 3 channels, 3 or 9): weight by each channel's luminance
+    if pref.per_channel:  # (R, ..., 3 channels, 3 or 9): weight by each channel's luminance
         y = rad * jnp.asarray(luminance_weights(), rad.dtype)
         y_sum = jnp.sum(y, axis=-1, keepdims=True)
         y = y / jnp.where(y_sum > 0, y_sum, 1.0)
         mom = jnp.sum(y[..., None] * mom, axis=-2)
+    g = rad.shape[0] // spread.shape[-1]  # reads per bin (`bin_table(reads=...)`)
     # uniform light: m₁, m₂ of the two levels the read interpolates, with the read's weights
     n_m = table.kernel_moments.shape[-1]
     grid = jnp.linspace(0.0, 1.0, n_m, dtype=sqa.dtype)
@@ -399,8 +407,20 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     m1 = at_read(table.kernel_moments[0])
     x_d = jnp.moveaxis(view_cos, -1, 0)
     vx, vy, vz = view[..., 0], view[..., 1], view[..., 2]
-    x_light = mom[..., 0] * vx + mom[..., 1] * vy + mom[..., 2] * vz  # ⟨ω_o, μ_k⟩
+    x_light = mom[..., 0] * vx + mom[..., 1] * vy + mom[..., 2] * vz  # ⟨ω_o, μ_r⟩
     x_uniform = m1 * x_d
+    if g > 1:  # a bin's g reads: radiance and uniform moments averaged, light's by luminance
+        lum = [float(c) for c in luminance_weights()]
+        y = rad[..., 0] * lum[0] + rad[..., 1] * lum[1] + rad[..., 2] * lum[2]
+        y_bin = _per_bin(y, g)
+        lit = y_bin > 0
+        y_div = jnp.where(lit, y_bin, 1.0)
+
+        def light_mean(v):  # luminance-weighted over the bin's reads (plain mean if dark)
+            return jnp.where(lit, _per_bin(y * v, g) / y_div, _per_bin(v, g) * (1.0 / g))
+
+        rad = _per_bin(rad, g) * (1.0 / g)
+        x_light, x_uniform = light_mean(x_light), _per_bin(x_uniform, g) * (1.0 / g)
 
     def soft(d, tol):  # a move within the prefilter's resolution is no move
         return jnp.sign(d) * jnp.maximum(jnp.abs(d) - tol, 0.0)
@@ -413,13 +433,25 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
         return BinLight(rad, shift)
     m2 = at_read(table.kernel_moments[1])
     xx, yy, zz, xy, yz, zx = (mom[..., c] for c in range(3, 9))
-    v_light = (xx * vx * vx + yy * vy * vy + zz * vz * vz
-               + 2.0 * (xy * vx * vy + yz * vy * vz + zx * vz * vx)) - x_light * x_light
-    v_uniform = 0.5 * (1.0 - m2) + (0.5 * (3.0 * m2 - 1.0) - m1 * m1) * x_d * x_d
+    x2_light = (xx * vx * vx + yy * vy * vy + zz * vz * vz
+                + 2.0 * (xy * vx * vy + yz * vy * vz + zx * vz * vx))  # E_L⟨ω_o, ω_i⟩²
+    if g == 1:
+        v_light = x2_light - x_light * x_light
+        v_uniform = 0.5 * (1.0 - m2) + (0.5 * (3.0 * m2 - 1.0) - m1 * m1) * x_d * x_d
+    else:  # the bin's reads pooled: E[x²] over them, less the bin's mean squared
+        x2_uniform = 0.5 * (1.0 - m2) + 0.5 * (3.0 * m2 - 1.0) * x_d * x_d
+        v_light = light_mean(x2_light) - x_light * x_light
+        v_uniform = _per_bin(x2_uniform, g) * (1.0 / g) - x_uniform * x_uniform
     dv = soft(v_light - v_uniform, VARIANCE_RESOLUTION)
     ok = v_uniform > 0
     ratio = jnp.where(ok, (v_uniform + dv) / jnp.where(ok, v_uniform, 1.0), 1.0)
     return BinLight(rad, shift, s * safe_sqrt(jnp.clip(ratio, 0.0, 4.0)))
+
+
+def _per_bin(v, g):
+    """Sums of `g` consecutive reads (R, ...) → (R / g, ...): bin k's reads are gk … gk + g − 1
+    (`bin_table(reads=g)`: the R reads sorted by incidence cosine)."""
+    return sum(v[i::g] for i in range(g))
 
 
 def moments_to_mean_cov(m):

@@ -4,8 +4,9 @@
 writes ``small_sources.json``, ``small_sources.md`` (the tables of docs/studies/improved.md,
 section "Many small sources") and ``small_sources_maps.png`` (the procedural maps);
 ``--bins`` writes ``improved_bins.json`` / ``.md`` instead (`bins_sweep`: every render with
-K = 2, 3, 4 bins and with K = 3 and `ModelOptions(light_spread=True)`, and the cost a point
-of each, section "Choosing K").
+K = 2, 3, 4 bins, with K = 3 and `ModelOptions(light_spread=True)`, and with K = 3 and 2 or 3
+prefiltered reads per bin (`ModelOptions(bin_reads=...)`), and the cost a point of each,
+section "Choosing K").
 
 Maps (equirectangular 512 × 1024 like the 1k Poly Haven maps, built here, fixed seeds):
 `lamps_map` (a dim night sky with hundreds of small lamps of many colours), `facade_map`
@@ -560,21 +561,29 @@ BINS_SWEEP = (2, 3, 4)
 SPREAD_VARIANT = "K=3 + spread"  # the default K with each bin's light-weighted spread
 
 
+#: K = 3 with g prefiltered reads per bin (`ModelOptions(bin_reads=g)`), without and with
+#: the light's spread
+READS_VARIANTS = {"K=3, 2 reads": (2, False), "K=3, 3 reads": (3, False),
+                  "K=3, 3 reads + spread": (3, True)}
+
+
 def _sweep_options(bins):
     """{column label: `ModelOptions` of improved} of the bins sweep: each K of `bins`, then
-    K = 3 with `light_spread`."""
+    K = 3 with `light_spread`, then K = 3 with more reads per bin (`READS_VARIANTS`)."""
     from ..realtime.options import ModelOptions
 
     out = {f"K={k}": ModelOptions(shat="lut", bins=k) for k in bins}
     out[SPREAD_VARIANT] = ModelOptions(shat="lut", bins=3, light_spread=True)
+    out.update({label: ModelOptions(shat="lut", bins=3, bin_reads=g, light_spread=ls)
+                for label, (g, ls) in READS_VARIANTS.items()})
     return out
 
 
 def bins_cost(bins=BINS_SWEEP, points: int = 2**18, repeats: int = 5, verbose=True) -> dict:
     """ns a shading point of `envmap_radiance` (float32, the wide grid of
     `kernel_bench.shading_points`, prefiltered venice_sunset, jitted whole): ideal, filtered
-    and improved with each K of `bins` and with K = 3 and `light_spread`, every program once
-    per round, rounds interleaved, minimum of `repeats`."""
+    and improved with each variant of `_sweep_options(bins)`, every program once per round,
+    rounds interleaved, minimum of `repeats`."""
     from ..core.film import Film
     from ..realtime.options import ModelOptions
     from ..shading.ibl import envmap_radiance
@@ -604,8 +613,9 @@ def bins_cost(bins=BINS_SWEEP, points: int = 2**18, repeats: int = 5, verbose=Tr
 
 
 def bins_sweep(cfg: Config = Config(), bins=BINS_SWEEP, verbose=True) -> dict:
-    """`improved` with each K of `bins` (`ModelOptions(bins=K)`), and with K = 3 and
-    `light_spread`, on every render of the study (dev, held-out and shipped maps): mean ΔE₀₀
+    """`improved` with each K of `bins` (`ModelOptions(bins=K)`), with K = 3 and
+    `light_spread`, and with K = 3 and more reads a bin (`READS_VARIANTS`), on every render
+    of the study (dev, held-out and shipped maps): mean ΔE₀₀
     and its ratio to `filtered`'s, and the cost a point (`bins_cost`). The table of
     docs/studies/improved.md, "Choosing K"."""
     from ..shading.ibl import DEFAULT_SOURCES, envmap_radiance

@@ -75,10 +75,11 @@ def test_reference_bench_tiny(tmp_path):
 
 def test_bins_cost_tiny():
     """`small_sources.bins_cost` (the cost column of "Choosing K") on 512 points, one round:
-    every program is timed, the light-spread variant (K = 3) included."""
-    from thinfilm_jax.studies.small_sources import bins_cost
+    every program is timed, the light-spread and reads-per-bin variants (K = 3) included."""
+    from thinfilm_jax.studies.small_sources import READS_VARIANTS, bins_cost
 
     r = bins_cost(bins=(2,), points=512, repeats=1, verbose=False)
     assert set(r["ns_per_point"]) == {"ideal", "filtered", "improved K=2",
-                                      "improved K=3 + spread"}
+                                      "improved K=3 + spread"} | {
+                                          f"improved {k}" for k in READS_VARIANTS}
     assert all(v > 0 for v in r["ns_per_point"].values())

@@ -68,6 +68,26 @@ def test_sphere_files_at_the_resolution_in_a_new_folder(sky, tmp_path, monkeypat
     assert np.abs(png - _read(out / "reference.png") * 255).max() <= 1.0
 
 
+def test_sphere_improved_takes_the_map_options(sky, tmp_path):
+    """--bin-reads / --light-spread reach `envmap_radiance(method="improved")`
+    (`ModelOptions.bin_reads`, `.light_spread`): the image differs from the default one, the
+    settings are in render.json; a bad value and the bubble are usage errors."""
+    outs = {}
+    for name, extra in (("default", []), ("reads", ["--bin-reads", "3", "--light-spread"])):
+        out = tmp_path / name
+        assert main(["render", "--envmap", str(sky), "--resolution", "12", "--method",
+                     "improved", "--out", str(out), "--quiet", *extra]) == 0
+        outs[name] = np.load(out / "render.npz")["improved"]
+        cfg = json.loads((out / "render.json").read_text())["config"]
+        assert (cfg["bin_reads"], cfg["light_spread"]) == ((3, True) if extra else (1, False))
+    m = np.isfinite(outs["default"])
+    assert np.abs(outs["reads"][m] - outs["default"][m]).max() > 1e-6
+    for bad in (["--bin-reads", "0"], ["--scene", "bubble", "--bin-reads", "2"],
+                ["--scene", "fig4", "--light-spread"]):
+        with pytest.raises(SystemExit):
+            main(["render", "--resolution", "12", "--out", str(tmp_path / "x"), *bad])
+
+
 def test_bad_material_and_incapable_method_are_usage_errors(capsys):
     with pytest.raises(SystemExit) as e:
         main(["render", "--eta-film", "Unobtainium"])

@@ -79,7 +79,8 @@ def _render(args) -> int:
         fail(f"--scene {own[0]} renders one scene alone; got {scenes}")
     own_opts = {"--thickness": args.thickness, "--eta-film": args.film_index,
                 "--eta-base": args.base_index, "--layers": args.layers, "--alpha": args.alpha,
-                "--thickness-range": args.thickness_range, "--elevation": args.elevation}
+                "--thickness-range": args.thickness_range, "--elevation": args.elevation,
+                "--bin-reads": args.bin_reads, "--light-spread": args.light_spread or None}
     if not own:
         given = [k for k, v in own_opts.items() if v is not None]
         if given:
@@ -134,10 +135,15 @@ def _render_scene(args, scene: str, out: str, fail) -> int:
             kw["alpha"] = args.alpha
         if args.method:
             kw["methods"] = tuple(args.method)
+        if args.bin_reads is not None:
+            kw["bin_reads"] = args.bin_reads
+        kw["light_spread"] = args.light_spread
     else:
         given = [k for k, v in (("--thickness", args.thickness), ("--layers", args.layers),
                                 ("--eta-base", args.base_index), ("--alpha", args.alpha),
-                                ("--method", args.method)) if v is not None]
+                                ("--method", args.method), ("--bin-reads", args.bin_reads),
+                                ("--light-spread", args.light_spread or None))
+                 if v is not None]
         if given:
             fail(f"not an option of --scene bubble: {', '.join(given)} (a free-standing film, "
                  "air on both sides, mirror-smooth, exact; it takes --eta-film and "
@@ -308,6 +314,11 @@ def build_parser() -> argparse.ArgumentParser:
                     choices=RENDER_METHODS,
                     help="methods, in columns (repeatable; sphere default: reference, "
                          "improved; study scenes: reference, ideal, filtered, improved)")
+    rd.add_argument("--bin-reads", dest="bin_reads", type=int, metavar="G",
+                    help="sphere, method improved: prefiltered reads per bin (1; 3 for maps "
+                         "of many small lights: ≈ 2× the cost, docs/studies/improved.md)")
+    rd.add_argument("--light-spread", dest="light_spread", action="store_true",
+                    help="sphere, method improved: each bin's spread follows its light")
     rd.add_argument("--alphas", type=float, nargs="+", help="α of the fig3 sweep "
                     "(0.05 0.15 0.3 0.6)")
     rd.add_argument("--resolution", type=int, help="pixels per image side (sphere, bubble: "

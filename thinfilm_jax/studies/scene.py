@@ -314,6 +314,9 @@ class SceneConfig:
     observer: str = DEFAULT_OBSERVER
     elevation_deg: float | None = None  # None: 15° (sphere), 30° (bubble: its thin top shows)
     ldr_srgb: bool = False
+    # sphere, method "improved" under the map (`ModelOptions.bin_reads`, `.light_spread`)
+    bin_reads: int = 1
+    light_spread: bool = False
     # bubble
     eta_film: Any = "water"
     thickness_top: float = 30.0
@@ -333,6 +336,9 @@ class SceneConfig:
             object.__setattr__(self, "elevation_deg", 15.0 if self.scene == "sphere" else 30.0)
         if self.scene == "sphere":
             check_methods(self.material, self.methods)
+        from ..realtime.options import ModelOptions
+
+        ModelOptions(bin_reads=self.bin_reads, light_spread=self.light_spread).checked()
 
 
 def _frame(cfg: SceneConfig, env):
@@ -354,7 +360,7 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
     from tqdm.auto import tqdm
 
     from ..shading.envmap import downsample
-    from ..shading.ibl import envmap_radiance
+    from ..shading.ibl import REALTIME_OPTIONS, envmap_radiance
     from ..shading.ibl_reference import GrazingLobeWarning, resample_factor
     from .render import method_map
 
@@ -399,8 +405,10 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
         else:
             pref = method_map(cache, "map", m, cfg.observer)
             obs = DEFAULT_OBSERVER if m == "khr" else cfg.observer
+            opts = REALTIME_OPTIONS._replace(bin_reads=cfg.bin_reads,
+                                             light_spread=cfg.light_spread)
             out = np.asarray(envmap_radiance(cfg.material, cfg.alpha, n, view, pref, method=m,
-                                             observer=obs))
+                                             observer=obs, options=opts))
             out = method_bands(m, out, cfg.observer)
         seconds[m] = time.perf_counter() - t0
         img = np.full(mask.shape + (out.shape[-1],), np.nan)

@@ -435,13 +435,11 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     xx, yy, zz, xy, yz, zx = (mom[..., c] for c in range(3, 9))
     x2_light = (xx * vx * vx + yy * vy * vy + zz * vz * vz
                 + 2.0 * (xy * vx * vy + yz * vy * vz + zx * vz * vx))  # E_L⟨ω_o, ω_i⟩²
-    if g == 1:
-        v_light = x2_light - x_light * x_light
-        v_uniform = 0.5 * (1.0 - m2) + (0.5 * (3.0 * m2 - 1.0) - m1 * m1) * x_d * x_d
-    else:  # the bin's reads pooled: E[x²] over them, less the bin's mean squared
-        x2_uniform = 0.5 * (1.0 - m2) + 0.5 * (3.0 * m2 - 1.0) * x_d * x_d
-        v_light = light_mean(x2_light) - x_light * x_light
-        v_uniform = _per_bin(x2_uniform, g) * (1.0 / g) - x_uniform * x_uniform
+    x2_uniform = 0.5 * (1.0 - m2) + 0.5 * (3.0 * m2 - 1.0) * x_d * x_d  # E_U⟨ω_o, ω_i⟩²
+    if g > 1:  # the bin's reads pooled, as their means above
+        x2_light, x2_uniform = light_mean(x2_light), _per_bin(x2_uniform, g) * (1.0 / g)
+    v_light = x2_light - x_light * x_light
+    v_uniform = x2_uniform - x_uniform * x_uniform
     dv = soft(v_light - v_uniform, VARIANCE_RESOLUTION)
     ok = v_uniform > 0
     ratio = jnp.where(ok, (v_uniform + dv) / jnp.where(ok, v_uniform, 1.0), 1.0)

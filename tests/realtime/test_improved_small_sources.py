@@ -109,6 +109,7 @@ def test_bin_reads_are_the_uniform_model_under_constant_light():
     from thinfilm_jax.realtime.improved import lookup_bins
     from thinfilm_jax.shading.envmap import load_envmap
     from thinfilm_jax.shading.patch import patch_radiance
+    from _geometry import front_facing
     from thinfilm_jax.shading.prefilter import bin_radiance_parts
 
     film = Film(600.0, 1.3, 2.0, 0.5)
@@ -117,11 +118,7 @@ def test_bin_reads_are_the_uniform_model_under_constant_light():
     assert tab.stats.shape == bin_table().stats.shape
     np.testing.assert_array_equal(np.asarray(tab.reads), np.asarray(bin_table(9).reads))
     rng = np.random.default_rng(5)
-    n = rng.normal(size=(300, 3))
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    v = rng.normal(size=(300, 3))
-    v /= np.linalg.norm(v, axis=-1, keepdims=True)
-    v = np.where(np.sum(n * v, -1, keepdims=True) < 0, -v, v)
+    n, v = front_facing(rng, 300)
     co = np.sum(n * v, -1)
     alpha = rng.uniform(0.05, 0.5, size=300)
     _, sb = lookup_bins(tab, co, alpha)

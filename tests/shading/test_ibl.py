@@ -129,14 +129,11 @@ def test_light_spread_is_the_uniform_model_under_constant_light(constant):
     the reads that see it (measured ratios 0.17–0.25 of s_k at a point whose mirror
     direction is the disc; asserted < 0.5)."""
     from thinfilm_jax.realtime.improved import bin_table, lookup_bins
+    from _geometry import front_facing
     from thinfilm_jax.shading.prefilter import bin_radiance_parts
 
     rng = np.random.default_rng(3)
-    n = rng.normal(size=(400, 3))
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    v = rng.normal(size=(400, 3))
-    v /= np.linalg.norm(v, axis=-1, keepdims=True)
-    v = np.where(np.sum(n * v, -1, keepdims=True) < 0, -v, v)
+    n, v = front_facing(rng, 400)
     co = np.sum(n * v, -1)
     alpha = rng.uniform(0.05, 0.5, size=400)
     tab = bin_table()

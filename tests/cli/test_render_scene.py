@@ -88,6 +88,61 @@ def test_sphere_improved_takes_the_map_options(sky, tmp_path):
             main(["render", "--resolution", "12", "--out", str(tmp_path / "x"), *bad])
 
 
+# a value of each own-scene option, none the default of a scene
+OPTION_VALUES = {"--thickness": ["500"], "--eta-film": ["1.33"], "--eta-base": ["2.5"],
+                 "--layers": ["SiO2:250"], "--alpha": ["0.3"],
+                 "--thickness-range": ["100", "800"], "--elevation": ["20"],
+                 "--bin-reads": ["2"], "--light-spread": []}
+
+
+def test_each_scene_refuses_the_options_it_does_not_take(tmp_path, capsys):
+    """Every own-scene option (`cli.main.OWN_SCENE_OPTIONS`) is a usage error, naming the
+    option, for each scene that does not take it: the other own scene and a study scene."""
+    from thinfilm_jax.cli.main import OWN_SCENE_OPTIONS
+
+    assert set(OPTION_VALUES) == set(OWN_SCENE_OPTIONS)
+    refused = 0
+    for option, (_, takes) in OWN_SCENE_OPTIONS.items():
+        for scene in {"sphere", "bubble", "fig4"} - set(takes):
+            with pytest.raises(SystemExit) as e:
+                main(["render", "--scene", scene, "--out", str(tmp_path / "x"), option,
+                      *OPTION_VALUES[option]])
+            assert e.value.code == 2
+            assert option in capsys.readouterr().err, (option, scene)
+            refused += 1
+    assert refused == 16
+
+
+def test_each_scene_uses_the_options_it_takes(tmp_path, monkeypatch):
+    """The other side of `OWN_SCENE_OPTIONS`: an option a scene takes changes the scene's
+    `SceneConfig` (caught before rendering), so none is silently ignored."""
+    from thinfilm_jax.cli.main import OWN_SCENE_OPTIONS
+    from thinfilm_jax.studies import scene as scene_mod
+
+    class Caught(Exception):
+        pass
+
+    def catch(cfg, **_):
+        raise Caught(cfg)
+
+    monkeypatch.setattr(scene_mod, "render_scene", catch)
+
+    def config(scene, extra):
+        with pytest.raises(Caught) as e:
+            main(["render", "--scene", scene, "--out", str(tmp_path / "x"), "--quiet", *extra])
+        return e.value.args[0]
+
+    used = 0
+    for scene in ("sphere", "bubble"):
+        default = config(scene, [])
+        for option, (_, takes) in OWN_SCENE_OPTIONS.items():
+            if scene in takes:
+                assert config(scene, [option, *OPTION_VALUES[option]]) != default, (option,
+                                                                                    scene)
+                used += 1
+    assert used == 11
+
+
 def test_bad_material_and_incapable_method_are_usage_errors(capsys):
     with pytest.raises(SystemExit) as e:
         main(["render", "--eta-film", "Unobtainium"])

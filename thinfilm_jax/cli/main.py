@@ -67,6 +67,27 @@ def _bench(args) -> int:
     return 0
 
 
+# the own scenes' options: argparse destination and the scenes that take each (the study
+# scenes take none of them)
+OWN_SCENE_OPTIONS = {
+    "--thickness": ("thickness", ("sphere",)),
+    "--eta-film": ("film_index", ("sphere", "bubble")),
+    "--eta-base": ("base_index", ("sphere",)),
+    "--layers": ("layers", ("sphere",)),
+    "--alpha": ("alpha", ("sphere",)),
+    "--thickness-range": ("thickness_range", ("bubble",)),
+    "--elevation": ("elevation", ("sphere", "bubble")),
+    "--bin-reads": ("bin_reads", ("sphere",)),
+    "--light-spread": ("light_spread", ("sphere",)),
+}
+
+
+def _given(args, options) -> list[str]:
+    """The `render` options among `options` that the command line gave (a flag: set)."""
+    dest = {"--method": "method", **{k: v[0] for k, v in OWN_SCENE_OPTIONS.items()}}
+    return [k for k in options if getattr(args, dest[k]) not in (None, False)]
+
+
 def _render(args) -> int:
     """`thinfilm-jax render`: one's own scene (sphere, bubble; `studies.scene`) or the study
     scenes (`studies.render`). Options that do not fit the scene are usage errors."""
@@ -77,12 +98,8 @@ def _render(args) -> int:
     fail = args.render_parser.error
     if own and (len(scenes) > 1):
         fail(f"--scene {own[0]} renders one scene alone; got {scenes}")
-    own_opts = {"--thickness": args.thickness, "--eta-film": args.film_index,
-                "--eta-base": args.base_index, "--layers": args.layers, "--alpha": args.alpha,
-                "--thickness-range": args.thickness_range, "--elevation": args.elevation,
-                "--bin-reads": args.bin_reads, "--light-spread": args.light_spread or None}
     if not own:
-        given = [k for k, v in own_opts.items() if v is not None]
+        given = _given(args, OWN_SCENE_OPTIONS)
         if given:
             fail(f"options of --scene sphere / bubble only: {', '.join(given)} (got --scene "
                  f"{' '.join(scenes)})")
@@ -122,7 +139,7 @@ def _render_scene(args, scene: str, out: str, fail) -> int:
     if args.envmap:
         kw["envmap"] = args.envmap[0]
     if scene == "sphere":
-        if args.thickness_range is not None:
+        if _given(args, ["--thickness-range"]):
             fail("--thickness-range applies to --scene bubble (use --thickness)")
         if args.layers is not None and (args.thickness is not None
                                         or args.film_index is not None):
@@ -139,11 +156,8 @@ def _render_scene(args, scene: str, out: str, fail) -> int:
             kw["bin_reads"] = args.bin_reads
         kw["light_spread"] = args.light_spread
     else:
-        given = [k for k, v in (("--thickness", args.thickness), ("--layers", args.layers),
-                                ("--eta-base", args.base_index), ("--alpha", args.alpha),
-                                ("--method", args.method), ("--bin-reads", args.bin_reads),
-                                ("--light-spread", args.light_spread or None))
-                 if v is not None]
+        given = _given(args, ["--method"] + [k for k, (_, takes) in OWN_SCENE_OPTIONS.items()
+                                             if "bubble" not in takes])
         if given:
             fail(f"not an option of --scene bubble: {', '.join(given)} (a free-standing film, "
                  "air on both sides, mirror-smooth, exact; it takes --eta-film and "

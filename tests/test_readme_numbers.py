@@ -509,8 +509,7 @@ def _bins_target_met(variant):
 def _bins_frontier():
     """(settings within 1.5× filtered, settings that meet the accuracy target, cheapest first)
     of the bins sweep, and the numbers the performance page quotes for them."""
-    d = artifact("improved_bins.json")
-    ns, rows = d["cost"]["ns_per_point"], d["rows"]
+    ns = artifact("improved_bins.json")["cost"]["ns_per_point"]
     ratio = {k[len("improved "):]: v / ns["filtered"] for k, v in ns.items()
              if k.startswith("improved ")}
     cheap = [k for k in ratio if ratio[k] <= 1.5]

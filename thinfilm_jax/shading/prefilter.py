@@ -389,10 +389,14 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     dirn, sqa = jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa, -1, 0)
     rad, mom = _read_levels(pref, (pref.radiance, pref.moments), dirn, sqa,
                             channels=(slice(None), slice(None if light_spread else 3)))
+    lum = [float(c) for c in luminance_weights()]
+
+    def luminance(v):  # components written out: a size-3 jnp.sum is a slow XLA:CPU kernel
+        return v[..., 0] * lum[0] + v[..., 1] * lum[1] + v[..., 2] * lum[2]
+
     if pref.per_channel:  # (R, ..., 3 channels, 3 or 9): weight by each channel's luminance
-        y = rad * jnp.asarray(luminance_weights(), rad.dtype)
-        y_sum = jnp.sum(y, axis=-1, keepdims=True)
-        y = y / jnp.where(y_sum > 0, y_sum, 1.0)
+        y_sum = luminance(rad)[..., None]
+        y = rad * jnp.asarray(lum, rad.dtype) / jnp.where(y_sum > 0, y_sum, 1.0)
         mom = jnp.sum(y[..., None] * mom, axis=-2)
     g = rad.shape[0] // spread.shape[-1]  # reads per bin (`bin_table(reads=...)`)
     # uniform light: m₁, m₂ of the two levels the read interpolates, with the read's weights
@@ -410,17 +414,16 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     x_light = mom[..., 0] * vx + mom[..., 1] * vy + mom[..., 2] * vz  # ⟨ω_o, μ_r⟩
     x_uniform = m1 * x_d
     if g > 1:  # a bin's g reads: radiance and uniform moments averaged, light's by luminance
-        lum = [float(c) for c in luminance_weights()]
-        y = rad[..., 0] * lum[0] + rad[..., 1] * lum[1] + rad[..., 2] * lum[2]
-        y_bin = _per_bin(y, g)
+        y = luminance(rad)
+        y_bin = _bin_mean(y, g)
         lit = y_bin > 0
         y_div = jnp.where(lit, y_bin, 1.0)
 
         def light_mean(v):  # luminance-weighted over the bin's reads (plain mean if dark)
-            return jnp.where(lit, _per_bin(y * v, g) / y_div, _per_bin(v, g) * (1.0 / g))
+            return jnp.where(lit, _bin_mean(y * v, g) / y_div, _bin_mean(v, g))
 
-        rad = _per_bin(rad, g) * (1.0 / g)
-        x_light, x_uniform = light_mean(x_light), _per_bin(x_uniform, g) * (1.0 / g)
+        rad = _bin_mean(rad, g)
+        x_light, x_uniform = light_mean(x_light), _bin_mean(x_uniform, g)
 
     def soft(d, tol):  # a move within the prefilter's resolution is no move
         return jnp.sign(d) * jnp.maximum(jnp.abs(d) - tol, 0.0)
@@ -437,7 +440,7 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
                 + 2.0 * (xy * vx * vy + yz * vy * vz + zx * vz * vx))  # E_L⟨ω_o, ω_i⟩²
     x2_uniform = 0.5 * (1.0 - m2) + 0.5 * (3.0 * m2 - 1.0) * x_d * x_d  # E_U⟨ω_o, ω_i⟩²
     if g > 1:  # the bin's reads pooled, as their means above
-        x2_light, x2_uniform = light_mean(x2_light), _per_bin(x2_uniform, g) * (1.0 / g)
+        x2_light, x2_uniform = light_mean(x2_light), _bin_mean(x2_uniform, g)
     v_light = x2_light - x_light * x_light
     v_uniform = x2_uniform - x_uniform * x_uniform
     dv = soft(v_light - v_uniform, VARIANCE_RESOLUTION)
@@ -446,10 +449,10 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     return BinLight(rad, shift, s * safe_sqrt(jnp.clip(ratio, 0.0, 4.0)))
 
 
-def _per_bin(v, g):
-    """Sums of `g` consecutive reads (R, ...) → (R / g, ...): bin k's reads are gk … gk + g − 1
-    (`bin_table(reads=g)`: the R reads sorted by incidence cosine)."""
-    return sum(v[i::g] for i in range(g))
+def _bin_mean(v, g):
+    """Means of `g` consecutive reads (R, ...) → (R / g, ...): bin k's reads are
+    gk … gk + g − 1 (`bin_table(reads=g)`: the R reads sorted by incidence cosine)."""
+    return sum(v[i::g] for i in range(g)) * (1.0 / g)
 
 
 def moments_to_mean_cov(m):

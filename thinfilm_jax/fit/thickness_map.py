@@ -68,6 +68,7 @@ from ..shading.patch import METHODS, patch_one, stack_patch_one
 from ..spectral.reflectance import band_centroids, band_film
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .engine import covariance, levenberg_marquardt
+from .map_quality import estimate_noise, neighbours, order_flags
 from .options import (
     MAP_BOUNDS,
     MISFIT_QUANTILE,
@@ -77,7 +78,7 @@ from .options import (
     reduced_chi2,
 )
 
-__all__ = ["MapResult", "fit_envmap_map", "fit_patch_map", "render_patch_map"]
+__all__ = ["MapResult", "estimate_noise", "fit_envmap_map", "fit_patch_map", "render_patch_map"]
 
 #: The map model's defaults: the real-time `filtered` path, small quadrature (its moments).
 MAP_OPTIONS = ModelOptions(quadrature=(8, 8), arithmetic="complex")
@@ -96,7 +97,15 @@ class MapResult(NamedTuple):
         reduced_chi2: Σ r² / (P (J − p)) over the P fitted pixels, J bands, p free
             parameters per pixel: ≈ 1 when the map model explains the image within σ.
         warnings: the misfit test of `options` (the 99.9 % point of χ²_ν/ν, ν = P (J − p));
-            the map fits also `warnings.warn` it as a `MisfitWarning`.
+            the map fits also `warnings.warn` it as a `MisfitWarning`; and a count of the
+            pixels at the box's bounds where any are.
+        sigma: the noise level the fit used (the given one, or the estimate from the image's
+            local differences, `estimate_noise`, where ``sigma=None``).
+        ambiguous: (H, W) bool: the pixel's thickness is not pinned by its data (`map_quality.order_flags`):
+            another fringe order explains it within its noise, or it sits on the box's bound.
+        alternative: (H, W) that other order's thickness (nm; NaN where none was found).
+        at_bound: (H, W) bool: the thickness sits on a bound of the box (the data pull
+            outside the box: a model that does not explain the pixel, or a box too narrow).
     """
 
     thickness: Array
@@ -107,6 +116,10 @@ class MapResult(NamedTuple):
     pixels_per_second: float
     reduced_chi2: float = float("nan")
     warnings: tuple = ()
+    sigma: float = float("nan")
+    ambiguous: Array | None = None
+    alternative: Array | None = None
+    at_bound: Array | None = None
 
 
 @functools.lru_cache(maxsize=32)
@@ -181,16 +194,6 @@ def _refine(obs, pix, x0, nb, nb_ok, ctx, sigma, tau, lo, hi, model, steps, free
     return jax.vmap(pixel)(obs, pix, x0, nb, nb_ok)
 
 
-def _neighbours(d, valid):
-    """(H, W, 4) values of the 4-neighbours of each pixel and (H, W, 4) validity (inside
-    the image and a fitted pixel, `valid` (H, W))."""
-    def shifted(a, fill):
-        p = np.pad(a, 1, mode="constant", constant_values=fill)
-        return np.stack([p[:-2, 1:-1], p[2:, 1:-1], p[1:-1, :-2], p[1:-1, 2:]], axis=-1)
-
-    return shifted(d, 0.0), shifted(valid, False)
-
-
 def _icm(energy, values, tau, sweeps, valid):
     """Iterated conditional modes on a (H, W, G) energy over grid `values` (G,) with the
     pairwise prior ½((v_g − v_q)/τ)² between 4-neighbours (checkerboard updates)."""
@@ -199,7 +202,7 @@ def _icm(energy, values, tau, sweeps, valid):
     colour = (np.add.outer(np.arange(h), np.arange(w)) % 2).astype(bool)
     for _ in range(sweeps):
         for c in (False, True):
-            nb, ok = _neighbours(values[idx], valid)
+            nb, ok = neighbours(values[idx], valid)
             pair = 0.5 * np.sum(np.where(ok[..., None], ((values[None, None, None, :]
                                                          - nb[..., None]) / tau) ** 2, 0.0),
                                 axis=2)
@@ -248,8 +251,10 @@ def _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps, sw
     if unknown or "thickness" not in free or len(set(free)) != len(free):
         raise ValueError(f"free must be ('thickness',) or ('thickness', 'eta_film'), got "
                          f"{free}" + (f" (unknown: {unknown})" if unknown else ""))
-    if not (isinstance(sigma, (int, float)) and np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma must be a finite number > 0, got {sigma!r}")
+    if sigma is not None and not (isinstance(sigma, (int, float)) and np.isfinite(sigma)
+                                  and sigma > 0):
+        raise ValueError(f"sigma must be a finite number > 0 or None (estimated from the "
+                         f"image), got {sigma!r}")
     if smoothness_nm is not None and not (np.isfinite(smoothness_nm) and smoothness_nm > 0):
         raise ValueError(f"smoothness_nm must be > 0 or None, got {smoothness_nm!r}")
     for name, v, lo in (("grid", grid, 2), ("eta_grid", eta_grid, 1), ("steps", steps, 0),
@@ -374,7 +379,7 @@ def _fit_map(obs, pix, ctx, model, valid, *, eta0, free, sigma, smoothness_nm, b
             loss = np.take_along_axis(e_d, idx[..., None], -1)[..., 0]
             se = np.full((h, w), np.nan)
             for _ in range(passes - 1):
-                nb, ok = _neighbours(x[..., 0], valid)
+                nb, ok = neighbours(x[..., 0], valid)
                 if smoothness_nm is None:
                     ok = np.zeros_like(ok)
                 out = []
@@ -398,11 +403,21 @@ def _fit_map(obs, pix, ctx, model, valid, *, eta0, free, sigma, smoothness_nm, b
     finally:
         bar.close()
     dt = time.perf_counter() - t0
+    ambiguous, alternative, at_bound, _ = order_flags(e_d, d_grid, x[..., 0], loss, valid,
+                                                 b["thickness"], obs.shape[-1],
+                                                 2 if free_eta else 1)
     x = np.where(valid[..., None], x, np.nan)
     loss, se = np.where(valid, loss, np.nan), np.where(valid, se, np.nan)
     red, msg = _misfit(loss[valid], obs.shape[-1], 2 if free_eta else 1)
+    if np.any(at_bound):
+        note = (f"{int(at_bound.sum())} of {n} pixels at a bound of the thickness box "
+                f"{tuple(b['thickness'])} nm: the model pulls them outside it (a model that "
+                f"does not explain them, or a box too narrow); flagged ambiguous")
+        warnings.warn(note, MisfitWarning, stacklevel=3)
+        msg = msg + (note,)
     return MapResult(jnp.asarray(x[..., 0]), jnp.asarray(x[..., 1]), jnp.asarray(loss),
-                     jnp.asarray(se), dt, n / dt, red, msg)
+                     jnp.asarray(se), dt, n / dt, red, msg, float(sigma),
+                     ambiguous, alternative, at_bound)
 
 
 def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
@@ -422,7 +437,8 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
         initial: `Film` with scalar fields: η₂ (initial / fixed), η₃, κ₃, η₁ (known).
         free: ("thickness",) or ("thickness", "eta_film").
         method: a `patch.METHODS` name for the map model ("filtered": real-time, default).
-        sigma: noise standard deviation of the image (absolute; weights and errors).
+        sigma: noise standard deviation of the image (absolute; weights and errors); None:
+            estimated from the image's local differences (`estimate_noise`).
         smoothness_nm: τ of the neighbour prior (None: independent pixels).
         bounds: {"thickness": (lo, hi), "eta_film": (lo, hi)} overriding the boxes of
             `options` and the default table `fit.options.MAP_BOUNDS` ((0, 2000) nm, as
@@ -456,6 +472,9 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
     free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
                              sweeps, chunk, options)
     model_options = _model_options(model_options)
+    if sigma is None:
+        img = np.asarray(image, float)
+        sigma = estimate_noise(img, np.ones(img.shape[:2], bool)) if img.ndim == 3 else 1.0
     image = _check_image(image, observer, float(sigma))
     h, w, n_bands = image.shape
     theta_in = np.asarray(theta_o, float)
@@ -537,33 +556,49 @@ def _band_pixel_model(method, observer, options, alpha):
     return model
 
 
+#: The map models of `fit_envmap_map`: the real-time paths of `envmap_radiance` (one shading
+#: point costs them a few hundred ns; the exact ones take a quadrature per point and per
+#: grid thickness, 10⁴–10⁶ times that, beyond a per-pixel screen).
+ENVMAP_MAP_METHODS = ("filtered", "improved")
+
+
 @functools.lru_cache(maxsize=32)
-def _envmap_model(observer, options, alpha, cross_band):
+def _envmap_model(observer, options, alpha, cross_band, method="filtered"):
     """model(x = (d, η₂), (n, ω_o), ctx = (η₃, κ₃, η₁, prefiltered map)) → (J,): one
-    shading point of `envmap_radiance(method="filtered")` (SPEC §9)."""
+    shading point of `envmap_radiance(method=method)` (SPEC §9)."""
     from ..shading.ibl import envmap_radiance  # lazily: the IBL stack only for envmap maps
 
     def model(x, pix, ctx):
         film = Film(x[0], x[1], ctx[0], ctx[1], ctx[2])
-        return envmap_radiance(film, alpha, pix[0], pix[1], ctx[3], method="filtered",
+        return envmap_radiance(film, alpha, pix[0], pix[1], ctx[3], method=method,
                                observer=observer, options=options, cross_band=cross_band)
     return model
 
 
 def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
-                   free=("thickness",), sigma: float = 0.01, smoothness_nm=None,
+                   free=("thickness",), sigma: float | None = None, smoothness_nm=None,
                    bounds=None, grid: int = 201, eta_grid: int = 7, steps: int = 8,
                    sweeps: int = 3, chunk: int = 2048, observer: str = DEFAULT_OBSERVER,
                    model_options: ModelOptions | None = None, options: FitOptions | None = None,
-                   cross_band: bool = True, devices=None, progress: bool = False) -> MapResult:
+                   cross_band: bool = True, method: str = "filtered", devices=None,
+                   progress: bool = False) -> MapResult:
     """Fit a thickness map (optionally η₂) to an image of a film under an environment map.
 
     The per-pixel model is `envmap_radiance(film, α, n_p, ω_o,p, prefiltered,
-    method="filtered")` (SPEC §9, the real-time path) with the pixel's known unit normal
+    method=method)` (SPEC §9, a real-time path) with the pixel's known unit normal
     n_p and view direction ω_o,p; the stages (grid, prior, Levenberg–Marquardt) are those of
     `fit_patch_map` (module docstring). Pixels whose normal is NaN (background) or faces
     away from the view (⟨n, ω_o⟩ ≤ 0: no signal) are not fitted and come back NaN; they
     do not take part in the prior.
+
+    An image the model does not explain (a photograph, an exact rendering fitted with
+    `filtered`) is caught three ways: the noise is estimated from the image (``sigma=None``)
+    rather than assumed, so the reduced χ² measures the model's error against the image's
+    own noise and warns past the misfit test; pixels pushed onto the thickness box's bounds
+    are counted in a warning; and both these and the pixels that another fringe order fits
+    within their (χ²-scaled) noise are flagged `ambiguous`, with that order's thickness in
+    `alternative` (`map_quality.order_flags`). `method="improved"` is the closer model where the light is
+    uneven (bright sources, Figure 3's scenes).
 
     Args:
         image: (H, W, J) band radiances; background pixels may hold anything finite.
@@ -575,6 +610,10 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
             `ibl.REALTIME_OPTIONS`; renamed from ``options``).
         options: a `FitOptions` or None, as `fit_patch_map` (its `bounds` apply).
         cross_band: as `envmap_radiance`.
+        method: the map model, one of `ENVMAP_MAP_METHODS`: "filtered" (K 29, the default)
+            or "improved" (≈ 2.3× its cost a point, closer to the exact reference).
+        sigma: the image's noise level (absolute), or None (default): estimated from the
+            image's local differences (`estimate_noise`), reported as `MapResult.sigma`.
         the rest: as `fit_patch_map`.
 
     Example:
@@ -597,6 +636,7 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
     from ..shading.prefilter import PrefilteredEnvMap
 
     V.check_choice("observer", observer, OBSERVERS)
+    V.check_choice("method", method, ENVMAP_MAP_METHODS)
     free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
                              sweeps, chunk, options)
     model_options = _model_options(REALTIME_OPTIONS if model_options is None
@@ -626,6 +666,8 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
             raise ValueError(f"{name} must be finite on the fitted pixels")
         if np.any(np.abs(np.linalg.norm(a, axis=-1) - 1) > 1e-3):
             raise ValueError(f"{name} must be unit vectors")
+    if sigma is None:
+        sigma = estimate_noise(np.where(valid[..., None], img, 0.0), valid)
     image = _check_image(np.where(valid[..., None], img, 0.0), observer, float(sigma))
     if np.ndim(alpha) != 0:
         raise ValueError(f"alpha must be a scalar, got shape {np.shape(alpha)}")
@@ -633,7 +675,7 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
     initial = V.check_film(initial, "initial")
     if any(np.ndim(v) for v in initial):
         raise ValueError("initial must be a Film with scalar fields")
-    model = _envmap_model(observer, model_options, float(alpha), bool(cross_band))
+    model = _envmap_model(observer, model_options, float(alpha), bool(cross_band), method)
     ctx = tuple(jnp.asarray(float(v)) for v in (initial.eta_base, initial.kappa_base,
                                                 initial.eta_outer)) + (prefiltered,)
     pix = (nrm[valid], vw[valid])

@@ -121,7 +121,11 @@ def run_fit_ellips_cli(args) -> int:
     _enable_x64()
     path = Path(args.data)
     out = Path(args.out) if args.out else path.with_name(path.stem + ".ellips.json")
-    check_output(path, out, args.overwrite)
+    try:
+        check_output(path, out, args.overwrite)  # the checks of `fit`, before any work
+    except SystemExit as e:
+        raise SystemExit(str(e).replace("thinfilm-jax fit:", "thinfilm-jax fit-ellips:")) \
+            from None
     initial = _material(args)
     data = read_ellipsometry(path)
     sig = (data.sigma_psi, data.sigma_delta) if data.has_sigma and np.all(

@@ -46,6 +46,7 @@ normal incidence and 0° at Brewster's angle arctan 1.5 = 56.31°):
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
@@ -69,7 +70,15 @@ def _as_stack(x) -> Stack:
                 and np.any(np.asarray(x.kappa_base) != 0):
             raise ValueError("film.kappa_base must be 0 when film.eta_base is an index model "
                              "(the model carries κ)")
-        return Stack.from_film(x)
+        if is_index_model(x.eta_base):
+            eb = x.eta_base
+        else:  # η₃ + iκ₃ written without Python-complex arithmetic (strict dtype promotion)
+            eb, k = jnp.asarray(x.eta_base), jnp.asarray(x.kappa_base)
+            if jnp.iscomplexobj(eb):
+                eb, k = jnp.real(eb), jnp.imag(eb) + k
+            dt = jnp.result_type(eb, k, float)
+            eb = jax.lax.complex(*jnp.broadcast_arrays(eb.astype(dt), k.astype(dt)))
+        return Stack(jnp.asarray(x.thickness)[..., None], (x.eta_film,), eb, x.eta_outer)
     raise TypeError(f"expected a thinfilm_jax Film or Stack, got {type(x).__name__}")
 
 

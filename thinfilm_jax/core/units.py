@@ -8,8 +8,8 @@ convert with hc = 1240 exactly (their oscillator tables reproduce to 3e-7 with 1
 whichever it is.
 
 Example:
-    >>> round(to_nanometres(2.0, "eV"), 4), to_nanometres(0.5, "µm"), to_nanometres(5000, "A")
-    (619.921, 500.0, 500.0)
+    >>> [round(float(to_nanometres(v, u)), 4) for v, u in ((2.0, "eV"), (0.5, "µm"), (5000, "A"))]
+    [619.921, 500.0, 500.0]
 """
 
 from __future__ import annotations

@@ -41,7 +41,7 @@ normal incidence and 0° at Brewster's angle arctan 1.5 = 56.31°):
     >>> glass = Stack([], (), 1.5)
     >>> psi, delta = ellipsometry(glass, np.cos(np.deg2rad([0.0, 45.0, 70.0])), 633.0)
     >>> np.round(psi, 3).tolist(), np.round(delta, 3).tolist()
-    ([45.0, 16.101, 15.718], [180.0, 180.0, 0.0])
+    ([45.0, 16.874, 20.636], [180.0, 180.0, 0.0])
 """
 
 from __future__ import annotations

@@ -12,7 +12,8 @@ Two layouts, told apart by their rows:
   e.g. ``nm AOI Psi Delta``): header lines, then rows of 4 (or 6, with σψ σΔ) numbers.
 
 The wavelength unit is named by the header (`_header_unit`: a line holding only the unit,
-a line starting with it, or a ``(unit)`` token; default nm when the header names none); wavelengths are returned in nm (`core.units.to_nanometres`: eV → hc/E with
+a line starting with it, or a ``(unit)`` token; default nm when the header names none);
+wavelengths are returned in nm (`core.units.to_nanometres`: eV → hc/E with
 hc = 1239.84198 eV nm). Angles, ψ and Δ are in degrees, as the files write them; Δ is
 returned as written (WVASE's are folded into [0°, 180°], other programs' may run to 360°:
 `fit_ellipsometry` folds both model and data). **σψ, σΔ are NaN where the file has none**

@@ -14,14 +14,15 @@ $$ r_i^\psi = \frac{\psi_i^{\rm model} - \psi_i}{\sigma^\psi_i},\qquad
    r_i^\Delta = \frac{F(\Delta_i^{\rm model}) - F(\Delta_i)}{\sigma^\Delta_i},\qquad
    F(\Delta) = \text{Δ mod 360°, reflected about 180°} \in [0°, 180°], $$
 
-with σ given, ½Σr² is WVASE's MSE² (2n − p)/2 (J.A. Woollam, *Guide to using WVASE*:
+With σ given, ½Σr² is WVASE's MSE² (2n − p)/2 (J.A. Woollam, *Guide to using WVASE*:
 MSE = √(Σ[(Δψ/σψ)² + (ΔΔ/σΔ)²]/(2n − p))) and the reduced χ² is that MSE². **Without σ**,
 σψ = 1° and σΔ = 1°/sin 2ψ_i (the observed ψ): a Δ error δΔ moves the measured Stokes pair
 (C, S) = sin 2ψ (cos Δ, sin Δ) by sin 2ψ δΔ, so this is the weighting of CompleteEASE's
 N, C, S misfit, and it fades out the points where ψ → 0 and Δ is undefined (ρ → 0). With
 1° for every Δ instead, one point near a ψ minimum (Δ swinging through 40° within 10 nm of
 wavelength) made the loss of a 120 nm oxide on silicon rugged at the 1 nm scale, and the
-search stopped in a false minimum at 121.2 nm. The model's Δ is folded as WVASE folds the data (`optics.ellipsometry`:
+search stopped in a false minimum at 121.2 nm. The model's Δ is folded as WVASE folds the
+data (`optics.ellipsometry`:
 F(Δ) = atan2(|Im ρ|, Re ρ)), and so is the observed Δ (data already in [0°, 180°] are
 unchanged; data reported in [0°, 360°) or (−180°, 180°] are folded the same way). Why
 this residual:
@@ -182,8 +183,8 @@ def fit_ellipsometry(psi, delta, wavelength, angle_deg, *, initial: Film | Stack
             model's ``"eta[0].coefficients[0]"`` (Cauchy A), an oscillator's
             ``"eta[0].terms[0].energy[0]"``, ...
         sigma_psi, sigma_delta: standard deviations of ψ and Δ (degrees; broadcast to (n,));
-            both or neither (None: 1° and 1°/sin 2ψ, module docstring). With them `FitResult.reduced_chi2` is WVASE's MSE² and the
-            misfit test runs.
+            both or neither (None: 1° and 1°/sin 2ψ, module docstring). With them
+            `FitResult.reduced_chi2` is WVASE's MSE² and the misfit test runs.
         options: `FitOptions` (search and solver fields, as for `fit_spectrum`).
 
     Returns:

@@ -117,5 +117,6 @@ from .optics.oscillators import DielectricIndex as DielectricIndex
 from .optics.oscillators import lorentz as lorentz
 from .optics.oscillators import gaussian as gaussian
 from .optics.oscillators import tauc_lorentz as tauc_lorentz
+from .optics.effective_medium import EffectiveMedium as EffectiveMedium
 
 __version__ = "0.2.0"

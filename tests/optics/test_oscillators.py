@@ -168,3 +168,36 @@ def test_bad_parameters():
         TaucLorentz([1.0], [5.0], [2.0], 1.0)
     with pytest.raises(TypeError, match="terms"):
         DielectricIndex(1.0, (cauchy(1.5),))
+
+
+# ------------------------------------------------------------------ effective media
+def test_effective_medium_rules():
+    """Bruggeman's ε solves its defining equation (both phases, L = 1/3 and 0.2); the rules
+    reach each pure phase at f = 0 and 1; Maxwell Garnett equals Bruggeman to first order in
+    a dilute f (both are the Clausius–Mossotti dilute limit); Bruggeman is symmetric."""
+    from thinfilm_jax.optics.effective_medium import EffectiveMedium
+
+    ea, eb = 1.33 ** 2, (3.9 + 0.02j) ** 2
+    for L in (1.0 / 3.0, 0.2):
+        for f in (0.1, 0.5, 0.9):
+            eps = complex(EffectiveMedium(1.33, 3.9 + 0.02j, f, depolarisation=L)(600.0)) ** 2
+            g = (1 - f) * (ea - eps) / (eps + L * (ea - eps)) + f * (eb - eps) / (
+                eps + L * (eb - eps))
+            assert abs(g) < 1e-12
+    for m in ("bruggeman", "maxwell_garnett", "linear"):
+        assert abs(complex(EffectiveMedium(1.33, 1.6, 0.0, method=m)(500.0)) - 1.33) < 1e-12
+        assert abs(complex(EffectiveMedium(1.33, 1.6, 1.0, method=m)(500.0)) - 1.6) < 1e-12
+    f = 1e-4
+    b = complex(EffectiveMedium(1.33, 1.6, f)(500.0)) ** 2
+    mg = complex(EffectiveMedium(1.33, 1.6, f, method="maxwell_garnett")(500.0)) ** 2
+    assert abs(b - mg) < 0.1 * f * f and abs(b - 1.33 ** 2) > 0.1 * f  # equal to O(f)
+    assert abs(complex(EffectiveMedium(1.33, 1.6, 0.3)(500.0))
+               - complex(EffectiveMedium(1.6, 1.33, 0.7)(500.0))) < 1e-13
+    with pytest.raises(ValueError, match="fraction"):
+        EffectiveMedium(1.33, 1.6, 1.5)
+    grad = jax.grad(lambda v: jnp.real(EffectiveMedium(1.33, 1.6, v)(500.0)))
+    assert np.isfinite(float(grad(0.0))) and np.isfinite(float(grad(1.0)))
+    from thinfilm_jax import Stack
+
+    assert "eta[0].fraction" in P.scalar_names(Stack([10.0], (EffectiveMedium(1.33, 1.6, 0.3),),
+                                                     3.9))

@@ -109,5 +109,14 @@ from .core.sharding import shard_batch as shard_batch
 from .spectral.spectra import OBSERVERS as OBSERVERS
 from .spectral.spectra import get_observer as get_observer
 from .spectral.spectra import sensitivity_ft as sensitivity_ft
+# ellipsometry (SPEC §14): ψ, Δ, their files, their fit, oscillator dispersion models
+from .optics.ellipsometry import ellipsometry as ellipsometry
+from .core.ellipsometry_data import read_ellipsometry as read_ellipsometry
+from .fit.ellipsometry_fit import fit_ellipsometry as fit_ellipsometry
+from .optics.oscillators import DielectricIndex as DielectricIndex
+from .optics.oscillators import lorentz as lorentz
+from .optics.oscillators import gaussian as gaussian
+from .optics.oscillators import tauc_lorentz as tauc_lorentz
+from .optics.effective_medium import EffectiveMedium as EffectiveMedium
 
 __version__ = "0.2.0"

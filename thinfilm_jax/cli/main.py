@@ -1,4 +1,4 @@
-"""Command line: ``thinfilm-jax figure7 | bench | render | fit | fit-map`` (also
+"""Command line: ``thinfilm-jax figure7 | bench | render | fit | fit-map | fit-ellips`` (also
 ``python -m thinfilm_jax``)."""
 
 from __future__ import annotations
@@ -358,6 +358,9 @@ def build_parser() -> argparse.ArgumentParser:
     from . import fit_map as fit_map_cli
 
     fit_map_cli.add_parser(sub)
+    from . import fit_ellips as fit_ellips_cli
+
+    fit_ellips_cli.add_parser(sub)
     return p
 
 

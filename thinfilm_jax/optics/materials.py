@@ -25,6 +25,7 @@ wavelength range (nm) and its source, either a table in ``thinfilm_jax/data/mate
 
 from __future__ import annotations
 
+import csv
 import functools
 import importlib.resources
 import numbers
@@ -173,14 +174,42 @@ def refractive_index(source) -> IndexModel:
 # --------------------------------------------------------------------------- CSV
 
 
-def read_csv(path, *, name: str = "", citation: str = "") -> TabulatedIndex:
+_WAVELENGTH_HEADER = re.compile(r"^wavelength\s*(?:[,_(\[]\s*(nm|um|µm|μm|microns?)\s*[)\]]?)?$")
+
+
+def _column_name(cell: str, where: str, wavelength_unit: str | None) -> str:
+    """A header cell as a column name: ``wavelength_nm`` / ``wavelength_um`` (also written
+    ``"Wavelength, µm"``, ``wavelength (nm)``: the refellips / WVASE tables), ``n``, ``k``."""
+    c = cell.strip().strip('"').strip().lower()
+    if c in ("wavelength_nm", "wavelength_um", "n", "k"):
+        return c
+    m = _WAVELENGTH_HEADER.match(c)
+    if not m:
+        return c
+    unit = m.group(1) or wavelength_unit
+    if unit is None:
+        raise ValueError(f"{where}: the header names the column {cell.strip()!r} without its "
+                         f"unit; write wavelength_nm or wavelength_um, or pass "
+                         f"wavelength_unit='nm' or 'um'")
+    return "wavelength_nm" if unit == "nm" else "wavelength_um"
+
+
+def read_csv(path, *, name: str = "", citation: str = "", interpolation: str = "nk",
+             wavelength_unit: str | None = None) -> TabulatedIndex:
     """A `TabulatedIndex` from a CSV file with a header naming its columns:
-    ``wavelength_nm`` or ``wavelength_um``, ``n`` and optionally ``k`` (any order). Blank
-    lines and lines starting with ``#`` are skipped. Errors name the file and the line."""
+    ``wavelength_nm`` or ``wavelength_um`` (also ``"Wavelength, µm"`` and the like, as
+    refellips and WVASE tables write it; a bare ``Wavelength`` takes `wavelength_unit`),
+    ``n`` and optionally ``k`` (any order). UTF-8 with or without a byte-order mark; cells
+    may be quoted; a ``k`` column that no row fills is κ = 0. Blank lines and lines starting
+    with ``#`` are skipped. `interpolation`:
+    "nk" or "epsilon" (`TabulatedIndex`). Errors name the file and the line."""
     path = Path(path)
     where = str(path)
+    if wavelength_unit not in (None, "nm", "um"):
+        raise ValueError(f"read_csv: wavelength_unit must be 'nm', 'um' or None; got "
+                         f"{wavelength_unit!r}")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as e:
         raise ValueError(f"{where}: cannot read the file ({e})") from None
     header, rows = None, []
@@ -188,20 +217,24 @@ def read_csv(path, *, name: str = "", citation: str = "") -> TabulatedIndex:
         s = line.strip()
         if not s or s.startswith("#"):
             continue
-        cells = [c.strip() for c in s.split(",")]
+        cells = [c.strip() for c in next(csv.reader([s]))]
         if header is None:
-            header = [c.lower() for c in cells]
+            header = [_column_name(c, where, wavelength_unit) for c in cells]
             continue
-        if len(cells) != len(header):
-            raise ValueError(f"{where}, line {lineno}: {len(cells)} values for the "
-                             f"{len(header)} columns {header}")
         try:
-            rows.append([float(c) for c in cells])
+            rows.append((lineno, [float(c) for c in cells]))
         except ValueError:
             raise ValueError(f"{where}, line {lineno}: not a number in {s!r}") from None
     if header is None:
         raise ValueError(f"{where}: no header line (expected columns wavelength_nm or "
                          f"wavelength_um, n, optional k)")
+    if rows and header[-1] == "k" and all(len(r) == len(header) - 1 for _, r in rows):
+        header = header[:-1]  # a k column named but never filled (refellips' air.csv): κ = 0
+    for lineno, r in rows:
+        if len(r) != len(header):
+            raise ValueError(f"{where}, line {lineno}: {len(r)} values for the "
+                             f"{len(header)} columns {header}")
+    rows = [r for _, r in rows]
     allowed = {"wavelength_nm", "wavelength_um", "n", "k"}
     unknown = [c for c in header if c not in allowed]
     if unknown or len(set(header)) != len(header):
@@ -215,7 +248,8 @@ def read_csv(path, *, name: str = "", citation: str = "") -> TabulatedIndex:
     col = {c: data[:, i] for i, c in enumerate(header)}
     wl = col[wl_cols[0]] * (1000.0 if wl_cols[0] == "wavelength_um" else 1.0)
     wl, n, k = check_table(wl, col["n"], col.get("k"), where=where)
-    return TabulatedIndex(wl, n, k, name=name or path.stem, citation=citation)
+    return TabulatedIndex(wl, n, k, name=name or path.stem, citation=citation,
+                          interpolation=interpolation)
 
 
 # --------------------------------------------------------------------------- YAML

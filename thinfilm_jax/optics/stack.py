@@ -231,6 +231,28 @@ def stack_transmittance_traced(stack: Stack, cos_theta, wavelength,
                       wavelength, want="T")
 
 
+def stack_amplitudes(stack: Stack, cos_theta, wavelength, *, layers: str = "auto") -> Array:
+    r"""The complex reflection amplitudes $(r_s, r_p) = \Gamma_0$ of `stack` (the recursion of
+    the module docstring; arguments as `stack_reflectance`), stacked on a leading axis of
+    size 2: ``out[0]`` = r_s, ``out[1]`` = r_p, complex dtype following the inputs.
+
+    Conventions (those of `fresnel.interface_amplitudes`, the `tmm` ones): time dependence
+    $e^{-i\omega t}$ with κ ≥ 0 absorbing, and r_p = −r_s at normal incidence. $R_s =
+    |r_s|^2$ and $R_p = |r_p|^2$ are `stack_reflectance`'s; the phases are what
+    ellipsometry reads (`optics.ellipsometry`: ρ = r_p / r_s)."""
+    d, etas, c, lam, _, layers = _check_args(stack, cos_theta, wavelength, "unpolarised",
+                                             layers)
+    return _stack_jit(d, etas, ("s", "p"), layers, c, lam, want="r")
+
+
+def stack_amplitudes_traced(stack: Stack, cos_theta, wavelength, *,
+                            layers: str = "scan") -> Array:
+    """`stack_amplitudes` without the input checks (trace-safe, as
+    `stack_reflectance_traced`): (r_s, r_p) on a leading axis of size 2."""
+    return _stack_jit(*_traced_args(stack, wavelength, "unpolarised", layers), cos_theta,
+                      wavelength, want="r")
+
+
 def _traced_args(stack, wavelength, polarisation, layers):
     seen: dict[int, Array] = {}  # one evaluation per model object (outside jit: per material)
 
@@ -348,6 +370,8 @@ def _stack_jit(thickness, etas, pols, layers, cos_theta, wavelength, want):
             carry, _ = jax.lax.scan(step, carry, xs, reverse=True)
         gam, prod = carry
 
+    if want == "r":  # the complex amplitudes Γ₀ (P, …) themselves (`stack_amplitudes`)
+        return jnp.broadcast_to(gam, (len(ip), *shape))
     vals = []
     for k, i in enumerate(ip):
         if want == "R":

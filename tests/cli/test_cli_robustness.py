@@ -4,6 +4,7 @@ before any work, never a traceback; outputs are never the input, never partial."
 import json
 import os
 
+import numpy as np
 import pytest
 
 import thinfilm_jax as tf
@@ -210,3 +211,30 @@ def test_fit_interrupted_while_writing_leaves_nothing(tmp_path, monkeypatch):
     assert main(["fit", str(src), "--overwrite"]) == 130
     assert out.read_text() == '{"old": true}'
     assert sorted(p.name for p in tmp_path.iterdir()) == ["obs.csv", "obs.fit.json"]
+
+
+def test_fit_names_every_out_of_range_material_by_its_option(tmp_path):
+    """A spectrum from 150 nm with ``--eta-film water --eta-base Si`` (data from 182 and
+    250 nm): one message names both, as the options typed (``--eta-film``, ``--eta-base``;
+    ``--layers layer i`` for a stack), not the library's ``initial.eta[0]``; the same
+    materials given in the file's ``initial`` setting keep the file's names."""
+    lam = np.linspace(150.0, 1100.0, 40)
+    rows = "\n".join(f"{w},0.1" for w in lam)
+    path = tmp_path / "spec.csv"
+    path.write_text(f"# theta_deg = 0\nwavelength_nm,R\n{rows}\n")
+    with pytest.raises(SystemExit) as e:
+        main(["fit", str(path), "--eta-film", "water", "--eta-base", "Si"])
+    msg = str(e.value.code)
+    assert "--eta-film (water)" in msg and "--eta-base (Si)" in msg
+    assert "initial." not in msg and "eta[0]" not in msg
+    with pytest.raises(SystemExit) as e:
+        main(["fit", str(path), "--layers", "water:100,SiO2:50", "--eta-base", "Si"])
+    msg = str(e.value.code)
+    assert all(s in msg for s in ("--layers layer 0 (water)", "--layers layer 1 (SiO2)",
+                                  "--eta-base (Si)"))
+    path.write_text('# theta_deg = 0\n# initial = {"eta_film": "water", "eta_base": "Si"}\n'
+                    f"wavelength_nm,R\n{rows}\n")
+    with pytest.raises(SystemExit) as e:
+        main(["fit", str(path)])
+    msg = str(e.value.code)
+    assert "initial.eta_film (water)" in msg and "initial.eta_base (Si)" in msg

@@ -232,3 +232,76 @@ def test_bubble_paths_stay_on_the_sphere_at_one_angle():
     n, v = p[mask], -dirs[mask]
     np.testing.assert_allclose(reads[0], 2 * np.sum(n * v, -1, keepdims=True) * n - v,
                                atol=1e-12)
+
+
+# ------------------------------------------------------------- what render.json records
+@pytest.mark.parametrize("scene", ["sphere", "bubble"])
+def test_render_json_is_what_was_rendered_and_renders_again(sky, tmp_path, scene):
+    """render.json's "config" records the scene's own settings as rendered (a TiO₂ sphere
+    names TiO₂ and its base, no bubble film; a bubble its film and thickness law, no
+    sphere material) and `config_from_dict` of it renders the same images again (12 px)."""
+    from thinfilm_jax import refractive_index
+    from thinfilm_jax.studies.scene import config_from_dict, make_material, render_scene
+
+    if scene == "sphere":
+        cfg = SceneConfig(material=make_material(300.0, refractive_index("TiO2"), 2.0 + 0.5j),
+                          envmap=str(sky), resolution=12, methods=("ideal",), alpha=0.3)
+    else:
+        cfg = SceneConfig(scene="bubble", envmap=str(sky), resolution=12,
+                          eta_film=refractive_index("TiO2"), thickness_top=50.0,
+                          thickness_bottom=700.0)
+    render_scene(cfg, tmp_path / "a", progress=False)
+    config = json.loads((tmp_path / "a" / "render.json").read_text())["config"]
+    if scene == "sphere":
+        assert config["material"]["layers"] == [["TiO2", 300.0]]
+        assert config["material"]["eta_base"] == {"n": 2.0, "k": 0.5}
+        assert config["alpha"] == 0.3 and config["methods"] == ["ideal"]
+        assert not {"eta_film", "thickness_top", "thickness_bottom", "orders"} & set(config)
+    else:
+        assert (config["eta_film"], config["thickness_top"], config["thickness_bottom"]) == (
+            "TiO2", 50.0, 700.0)
+        assert not {"material", "alpha", "methods", "bin_reads"} & set(config)
+    again = config_from_dict(config)
+    render_scene(again, tmp_path / "b", progress=False)
+    a, b = np.load(tmp_path / "a" / "render.npz"), np.load(tmp_path / "b" / "render.npz")
+    assert sorted(a.files) == sorted(b.files)
+    for k in a.files:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+def test_render_reports_warm_throughput_apart_from_prefiltering(sky, tmp_path, monkeypatch):
+    """A real-time method's points/s come from a second, warm call of the same shading (the
+    first one compiles), and the map's prefiltering is timed apart: render.json's
+    warm_seconds encloses the second call alone, points_per_second_warm = points /
+    warm_seconds, and the composite labels say "warm" (the reference, one chunk here, says
+    its throughput includes compilation). No timing is compared with a target."""
+    import time
+
+    import thinfilm_jax.shading.ibl as ibl
+    from thinfilm_jax.studies.scene import format_summary, render_scene, throughput_label
+
+    calls = []
+    real = ibl.envmap_radiance
+
+    def timed(*args, **kw):
+        t0 = time.perf_counter()
+        out = real(*args, **kw)
+        out = np.asarray(out)
+        calls.append((kw.get("method"), time.perf_counter() - t0))
+        return out
+
+    monkeypatch.setattr(ibl, "envmap_radiance", timed)
+    cfg = SceneConfig(envmap=str(sky), resolution=12, methods=("reference", "ideal"))
+    summary = render_scene(cfg, tmp_path, progress=False)
+    ideal = [t for m, t in calls if m == "ideal"]
+    assert len(ideal) == 2  # the first call and the warm one
+    assert summary["warm_seconds"]["ideal"] >= ideal[1]
+    assert summary["seconds"]["ideal"] >= ideal[0]
+    assert set(summary["prefilter_seconds"]) == {"ideal"}
+    pts = summary["points"]
+    assert summary["points_per_second_warm"]["ideal"] == pts / summary["warm_seconds"]["ideal"]
+    assert "reference" not in summary["warm_seconds"]  # one chunk: no compiled chunk to time
+    assert throughput_label(summary, "ideal", pts).endswith("points/s warm")
+    assert "incl. compile" in throughput_label(summary, "reference", pts)
+    table = format_summary(summary)
+    assert "warm pts/s" in table and "prefilt s" in table

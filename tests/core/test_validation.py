@@ -367,3 +367,27 @@ def test_stiles_burch_bands_leave_unit_interval():
              cos_theta=0.805742046677)
     assert 1.0115 < float(hi[0]) < 1.0 - w[:, 0].clip(max=0).sum()
     assert -1.2e-3 < float(lo[0]) < -1.1e-3
+
+
+def test_out_of_range_materials_are_all_named_by_the_callers_names():
+    """A `Film` with index models is checked under its own field names (``initial.eta_film``,
+    not the ``initial.eta[0]`` of the one-layer stack it runs as), and every index that does
+    not cover the wavelengths is listed, not only the first; a `Stack` lists its layers by
+    ``eta[i]`` the same way."""
+    lam = np.linspace(150.0, 1100.0, 20)  # water: 182–1129 nm, Si: 250–1450 nm
+    water, si, sio2 = (tf.refractive_index(n) for n in ("water", "Si", "SiO2"))
+    obs = np.full(lam.shape, 0.1)
+    with pytest.raises(ValueError) as e:
+        tf.fit_spectrum(obs, lam, 1.0, initial=tf.Film(300.0, water, si))
+    msg = str(e.value)
+    assert "initial.eta_film (water)" in msg and "initial.eta_base (Si)" in msg
+    assert "eta[0]" not in msg and "2 indices" in msg
+    with pytest.raises(ValueError) as e:
+        tf.fit_spectrum(obs, lam, 1.0, initial=tf.Stack([100.0, 50.0], (water, sio2), si))
+    msg = str(e.value)
+    assert all(s in msg for s in ("initial.eta[0] (water)", "initial.eta[1] (SiO2)",
+                                  "initial.eta_base (Si)"))
+    from thinfilm_jax.core._validate import check_material
+
+    with pytest.raises(ValueError, match=r"^film\.eta_film \(water\) is defined on 182"):
+        check_material(tf.Film(300.0, water, 1.5), "film", lam)  # one failing: as it was

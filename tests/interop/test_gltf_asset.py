@@ -239,3 +239,95 @@ def test_roughness_factor_is_sqrt_alpha():
             G.film_to_gltf(film, alpha=bad)
     with pytest.raises(ValueError, match="metallicRoughnessTexture"):
         G.alpha_from_gltf({"pbrMetallicRoughness": {"metallicRoughnessTexture": {"index": 0}}})
+
+
+# -------------------------------------------------------------- dispersive films
+def test_dispersive_film_is_written_at_a_stated_wavelength(tmp_path):
+    """A dispersive film (water on glass; TiO₂ on glass) is written with its indices at
+    ``wavelength_nm`` (550 nm by default), recorded in the material's ``extras.thinfilm_jax``
+    with the model's name and its n, k there; it reads back as that constant film. An index
+    absorbing at the wavelength is refused where glTF cannot hold it (a silicon base), as is a
+    wavelength outside the model's data; a film of numbers has no such record."""
+    from thinfilm_jax import refractive_index
+
+    water, tio2 = refractive_index("water"), refractive_index("TiO2")
+    doc = G.write_gltf(tmp_path / "soap.gltf", Film(_map(), water, 1.5), alpha=ALPHA)
+    material = doc["materials"][0]
+    n550 = float(np.real(water(550.0)))
+    assert material["extensions"][G.EXTENSION]["iridescenceIor"] == n550
+    record = material["extras"]["thinfilm_jax"]
+    assert record["index_wavelength_nm"] == 550.0
+    assert record["dispersive_indices"]["eta_film"] == {"name": "water", "n": n550, "k": 0.0}
+    film, _ = G.read_gltf(tmp_path / "soap.gltf")
+    assert film.eta_film == n550 and film.eta_base == 1.5
+    # another wavelength, another constant index; TiO₂'s κ ≈ 1e-5 at 450 nm is recorded
+    m450 = G.film_to_gltf(Film(300.0, tio2, 1.5), wavelength_nm=450.0)
+    n450 = complex(np.asarray(tio2(450.0)))
+    assert m450["extensions"][G.EXTENSION]["iridescenceIor"] == n450.real
+    assert m450["extras"]["thinfilm_jax"]["index_wavelength_nm"] == 450.0
+    assert m450["extras"]["thinfilm_jax"]["dispersive_indices"]["eta_film"]["k"] == n450.imag
+    assert "extras" not in G.film_to_gltf(Film(300.0, 1.33, 1.5))
+    with pytest.raises(ValueError, match="absorbing base"):
+        G.film_to_gltf(Film(300.0, refractive_index("SiO2"), refractive_index("Si")))
+    with pytest.raises(ValueError, match=r"wavelength_nm = 2000.*182"):
+        G.film_to_gltf(Film(300.0, water, 1.5), wavelength_nm=2000.0)
+    with pytest.raises(ValueError, match="wavelength_nm"):
+        G.film_to_gltf(Film(300.0, water, 1.5), wavelength_nm=-5.0)
+    # what it costs is measured, not zero (docs/how-to/gltf.md: soap film mean 0.81, max 3.65)
+    cost = G.constant_index_error(Film(0.0, water, 1.0), thickness=[500.0, 900.0],
+                                  theta_deg=[0.0, 60.0])
+    assert cost["n"] == 4 and 0 < cost["mean"] <= cost["max"] < 10
+
+
+def _photo(folder):
+    """An 8 × 6 sRGB PNG of a soap wedge (water in air, 150–650 nm) and a mask of its left
+    half."""
+    import OpenImageIO as oiio
+
+    from thinfilm_jax import refractive_index
+    from thinfilm_jax.fit.photo import render_photo
+
+    d = np.broadcast_to(150.0 + 500.0 * np.arange(8)[None, :] / 7, (6, 8)).copy()
+    lin = render_photo(Film(0.0, refractive_index("water"), 1.0), d, exposure=0.8)
+    srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.clip(lin, 0, 1) ** (1 / 2.4)
+                    - 0.055)
+    for name, a in (("soap.png", np.round(np.clip(srgb, 0, 1) * 255).astype(np.uint8)),
+                    ("left.png", np.where(np.arange(8)[None, :] < 4, 255, 0)
+                     .astype(np.uint8).repeat(6, 0)[..., None])):
+        out = oiio.ImageOutput.create(str(folder / name))
+        assert out.open(str(folder / name), oiio.ImageSpec(8, 6, a.shape[-1], oiio.UINT8))
+        out.write_image(np.ascontiguousarray(a))
+        out.close()
+    return d
+
+
+def test_fit_map_photo_gltf_asset_validates(validate, tmp_path):
+    """``fit-map PHOTO --camera srgb --eta-film water --gltf DIR`` (the photographs page's
+    soap film) writes an asset the validator passes, its IOR water's at 550 nm recorded in
+    the material; with ``--mask`` the unfitted pixels take their nearest fitted value (the
+    texture has no holes) and their count is in fit_photo.json."""
+    from thinfilm_jax import refractive_index
+    from thinfilm_jax.cli.main import main
+
+    _photo(tmp_path)
+    args = ["fit-map", str(tmp_path / "soap.png"), "--camera", "srgb", "--eta-film", "water",
+            "--eta-base", "1", "--thickness-range", "0", "1000", "--quiet",
+            "--mask", str(tmp_path / "left.png"), "--out", str(tmp_path / "out"),
+            "--gltf", str(tmp_path / "gltf"), "--gltf-wavelength", "589"]
+    assert main(args) == 0
+    (report,) = validate(tmp_path / "gltf" / "fit_map.gltf")
+    assert _problems(report) == [] and report["info"]["hasDefaultScene"]
+    material = G.load_gltf(tmp_path / "gltf" / "fit_map.gltf")["materials"][0]
+    assert material["extras"]["thinfilm_jax"]["index_wavelength_nm"] == 589.0
+    n589 = float(np.real(refractive_index("water")(589.0)))
+    assert material["extensions"][G.EXTENSION]["iridescenceIor"] == n589
+    assert material["pbrMetallicRoughness"]["roughnessFactor"] == 0.0  # a mirror fit
+    summary = json.loads((tmp_path / "out" / "fit_photo.json").read_text())
+    assert summary["gltf"]["unfitted_pixels_filled"] == 24
+    fitted = np.load(tmp_path / "out" / "thickness.npy")
+    film, _ = G.read_gltf(tmp_path / "gltf" / "fit_map.gltf")
+    back = np.asarray(film.thickness)
+    bound = (np.nanmax(fitted) - np.nanmin(fitted)) / 510
+    assert np.isfinite(back).all()
+    np.testing.assert_allclose(back[:, :4], fitted[:, :4], rtol=0, atol=bound * (1 + 1e-9))
+    np.testing.assert_allclose(back[:, 4:], back[:, 3:4].repeat(4, 1), rtol=0, atol=1e-9)

@@ -3,13 +3,15 @@ error (exit status 2, no traceback), found before minutes of computing.
 
 `check_args` looks at the options a sub-command defines, by name; `run_command` runs the
 sub-command and turns what can still go wrong with the user's input (an unreadable file, a
-value the library rejects, Ctrl-C) into a one-line message.
+value the library rejects, Ctrl-C) into a one-line message that names the options the user
+typed, not the library's argument names (`cli_names`).
 """
 
 from __future__ import annotations
 
 import math
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -110,6 +112,43 @@ def _check_out(parser, command, args) -> None:
                 break
 
 
+#: the library's argument names in messages (``initial.eta_film``: a field of the material
+#: the command built) → the option the user gave it as, and that option's argparse
+#: destinations (one per sub-command that has it)
+CLI_NAMES = {
+    "eta_film": ("--eta-film", ("eta_film", "eta_film_index", "film_index")),
+    "eta_base": ("--eta-base", ("eta_base", "eta_base_index", "base_index")),
+    "eta_outer": ("--eta-outer", ("eta_outer", "eta_outer_index")),
+    "kappa_base": ("--kappa-base", ("kappa_base",)),
+}
+_API_NAME = re.compile(r"\b(?:initial|template|film|material|stack)\.(eta_film|eta_base|"
+                       r"eta_outer|kappa_base|eta\[(\d+)\])(?![\w\[])")
+
+
+def cli_names(message: str, args) -> str:
+    """`message` with the library's names of what the command line gave (``initial.eta_film``,
+    ``template.eta_base``, ``initial.eta[1]`` of a ``--layers`` stack) replaced by the options
+    the user typed (``--eta-film``, ``--eta-base``, ``--layers layer 1``). A name whose option
+    was not given (a setting read from a file) is left as it is.
+
+    Example:
+        >>> import argparse
+        >>> args = argparse.Namespace(eta_film_index="water", eta_base_index="Si")
+        >>> cli_names("initial.eta_film (water) ...; initial.eta_base (Si) ...", args)
+        '--eta-film (water) ...; --eta-base (Si) ...'
+    """
+    def given(dests) -> bool:
+        return any(getattr(args, d, None) not in (None, False) for d in dests)
+
+    def swap(m: re.Match) -> str:
+        if m.group(2) is not None:
+            return (f"--layers layer {m.group(2)}" if given(("layers",)) else m.group(0))
+        flag, dests = CLI_NAMES[m.group(1)]
+        return flag if given(dests) else m.group(0)
+
+    return _API_NAME.sub(swap, message)
+
+
 def run_command(args) -> int:
     """Run ``args.func(args)``; user-facing failures become one line on stderr.
 
@@ -120,6 +159,10 @@ def run_command(args) -> int:
     prog = f"thinfilm-jax {getattr(args, 'command', '')}".strip()
     try:
         return args.func(args)
+    except SystemExit as e:  # a command's own one-line message (`fit`): the same names
+        if isinstance(e.code, str):
+            raise SystemExit(cli_names(e.code, args)) from None
+        raise
     except KeyboardInterrupt:
         if os.environ.get("THINFILM_JAX_TRACEBACK"):
             raise
@@ -129,5 +172,5 @@ def run_command(args) -> int:
         if os.environ.get("THINFILM_JAX_TRACEBACK"):
             raise
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        print(f"{prog}: error: {msg}", file=sys.stderr)
+        print(f"{prog}: error: {cli_names(msg, args)}", file=sys.stderr)
         return 1

@@ -26,7 +26,10 @@ minimum and maximum covering the map, factor 1), `KHR_materials_ior` (η₃) and
 ``--gltf-bits 16``; it gives back the map to (max − min)/(2(2ᵇ − 1)) nm). What glTF cannot
 hold is a usage error before the fit: κ₃ > 0 (glTF's metals are a Schlick tint, its
 dielectrics a real IOR; fit with ``--kappa-base 0`` or leave out ``--gltf``), η₁ ≠ 1, and a
-fitted η₂ map (``--free eta_film``: the extension has one `iridescenceIor`).
+fitted η₂ map (``--free eta_film``: the extension has one `iridescenceIor`). A dispersive
+material (``--eta-film water``) is written with its index at ``--gltf-wavelength`` (550 nm),
+recorded in the material's ``extras.thinfilm_jax`` (the colour this costs: docs/how-to/gltf.md).
+The same ``--gltf`` works for a photograph (``--camera``, `thinfilm_jax.cli.fit_photo`).
 
 Each index (``--eta-film``, ``--eta-base``, ``--eta-outer``) is a number (it stays a
 number) or a material (SPEC §12): a bundled name (``SiO2``, ``Si``, ``Si3N4``, ...) or a
@@ -48,6 +51,8 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+
+from ._output import gltf_line
 
 #: the parser's numeric options are checked by `_checks.check_args` (usage errors); the
 #: indices by `_index_arg` (they may be materials, so they are stored under other names)
@@ -157,6 +162,10 @@ def add_parser(sub) -> None:
                         "thickness texture fit_map_thickness.png (KHR_materials_iridescence)")
     p.add_argument("--gltf-bits", dest="gltf_bits", type=int, choices=[8, 16], default=8,
                    help="bits of the glTF thickness texture (8)")
+    p.add_argument("--gltf-wavelength", dest="gltf_wavelength", type=float, default=550.0,
+                   metavar="NM",
+                   help="wavelength at which a material's dispersive index is written as "
+                        "glTF's one constant IOR (550)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     from .fit_photo import add_arguments
 
@@ -213,16 +222,14 @@ def _gltf_problem(args) -> str | None:
         return f"{gltf} exists and is not a folder"
     from ..interop.gltf import film_to_gltf
 
-    materials = [f"{flag} {getattr(args, a).text}" for flag, (a, _, _) in INDEX_OPTIONS.items()
-                 if not getattr(args, a).number]
-    if materials:
-        return (f"glTF holds constant IORs, not the dispersive index of "
-                f"{', '.join(materials)} (give numbers)")
+    wl = args.gltf_wavelength
+    if not (np.isfinite(wl) and wl > 0):
+        return f"--gltf-wavelength must be a wavelength > 0 nm, got {wl:g}"
     try:  # the film's scalar fields, as the written material will hold them
-        film_to_gltf(_film(args, 0.0))
+        film_to_gltf(_film(args, 0.0), wavelength_nm=wl)
     except ValueError as e:
-        hint = (" — fit with --kappa-base 0 or leave out --gltf"
-                if args.kappa_base > 0 else "")
+        hint = (" — give a non-absorbing --eta-base (--kappa-base 0) or leave out --gltf"
+                if "absorbing base" in str(e) else "")
         return f"{e}{hint}"
     return None
 
@@ -256,9 +263,12 @@ def run_fit_map_cli(args) -> int:
     if getattr(args, "camera", None) is not None:
         if args.theta_o_map is not None:
             args.usage_error("argument --theta-o-map: a photograph has one view (--theta-o)")
-        if args.gltf is not None or "eta_film" in args.free:
-            args.usage_error("a photograph fits the thickness alone (no --free eta_film, no "
-                             "--gltf)")
+        if "eta_film" in args.free:
+            args.usage_error("a photograph fits the thickness alone (no --free eta_film)")
+        if args.gltf is not None:
+            problem = _gltf_problem(args)
+            if problem is not None:
+                args.usage_error(f"argument --gltf: {problem}")
         return run_photo(args)
     if Path(args.image).suffix.lower() in PHOTO_SUFFIXES or args.reference:
         args.usage_error(f"{Path(args.image).name} is a photograph: give --camera (srgb, "
@@ -319,18 +329,9 @@ def run_fit_map_cli(args) -> int:
     save_thickness_png(out / "thickness_map.png", d, title)
     gltf = None
     if getattr(args, "gltf", None) is not None:
-        from ..interop.gltf import EXTENSION, write_gltf
+        from ._output import write_map_gltf
 
-        gdir = Path(args.gltf)
-        gdir.mkdir(parents=True, exist_ok=True)
-        doc = write_gltf(gdir / "fit_map.gltf", _film(args, d),
-                         alpha=args.alpha, bits=args.gltf_bits)
-        ext = doc["materials"][0]["extensions"][EXTENSION]
-        gltf = {"folder": str(gdir), "files": ["fit_map.gltf", doc["buffers"][0]["uri"],
-                                               doc["images"][0]["uri"]],
-                "bits": args.gltf_bits,
-                "thickness_minimum_nm": ext["iridescenceThicknessMinimum"],
-                "thickness_maximum_nm": ext["iridescenceThicknessMaximum"]}
+        gltf = write_map_gltf(args, _film(args, d), args.alpha)
     pct = (5, 25, 50, 75, 95)
     summary = {
         "image": str(args.image), "shape": [h, w],
@@ -338,7 +339,7 @@ def run_fit_map_cli(args) -> int:
                          else getattr(args, k)) for k in (
             "theta_o", "theta_o_map", "alpha", "eta_film", "eta_base", "kappa_base",
             "eta_outer", "free", "smoothness", "sigma", "thickness_range", "grid", "method",
-            "observer", "chunk", "devices", "gltf", "gltf_bits")},
+            "observer", "chunk", "devices", "gltf", "gltf_bits", "gltf_wavelength")},
         "bands": list(get_observer(args.observer).band_names),
         "thickness_nm": {f"p{q}": float(np.percentile(d, q)) for q in pct}
         | {"min": float(d.min()), "max": float(d.max())},
@@ -365,7 +366,5 @@ def run_fit_map_cli(args) -> int:
           f"RMS/σ median {np.median(rms):.2f}; {res.pixels_per_second:.0f} pixels/s warm, "
           f"compile {compile_s:.1f} s")
     if gltf is not None:
-        print(f"wrote {gltf['folder']}/{', '.join(gltf['files'])}: "
-              f"iridescenceThicknessMinimum {gltf['thickness_minimum_nm']:.2f} nm, "
-              f"…Maximum {gltf['thickness_maximum_nm']:.2f} nm, {args.gltf_bits}-bit")
+        print(gltf_line(gltf))
     return 0

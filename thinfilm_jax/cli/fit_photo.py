@@ -22,6 +22,12 @@ summary, warnings, timing). A reduced χ² above 4 means the model does not expl
 the warning is printed and stored, and the exit status stays 0 (the files are written) unless
 ``--strict``, which makes it exit 3.
 
+``--gltf DIR`` also writes the map as a glTF 2.0 asset (as for band images: ``DIR/fit_map.gltf``,
+``.bin``, ``_thickness.png``); a dispersive material (water, TiO2) is written with its index
+at ``--gltf-wavelength`` (550 nm), recorded in the material's ``extras``; a mirror fit
+(no ``--alpha``) is written with roughness 0; unfitted pixels (outside ``--mask``) take their
+nearest fitted pixel's thickness.
+
 Example::
 
     thinfilm-jax fit-map wafer.tif --camera "Nikon 5100 (NPL)" --encoding linear \\
@@ -161,6 +167,11 @@ def run_photo(args) -> int:
     from ._output import save_thickness_png
 
     save_thickness_png(out / "thickness.png", d, title, amb)
+    gltf = None
+    if args.gltf is not None:
+        from ._output import write_map_gltf
+
+        gltf = write_map_gltf(args, template._replace(thickness=d), alpha)
     summary = {"photo": str(image), "shape": [h, w],
                "settings": {"camera": args.camera, "illuminant": args.illuminant,
                             "encoding": args.encoding, "bit_depth": args.bit_depth,
@@ -169,10 +180,14 @@ def run_photo(args) -> int:
                             "eta_base": args.eta_base_index.text,
                             "theta_o_deg": args.theta_o or 0.0, "alpha": alpha,
                             "thickness_range": list(args.thickness_range),
-                            "smoothness_nm": args.smoothness},
+                            "smoothness_nm": args.smoothness, "gltf": args.gltf,
+                            "gltf_bits": args.gltf_bits,
+                            "gltf_wavelength": args.gltf_wavelength},
                **res.summary(),
                "outputs": ["thickness.npy", "stderr.npy", "ambiguous.npy", "maps.exr",
                            "thickness.png", "fit_photo.json"]}
+    if gltf is not None:
+        summary["gltf"] = gltf
     write_json(out / "fit_photo.json", summary)
     ok = np.isfinite(d)
     print(f"wrote {out}/thickness.png, maps.exr, thickness.npy, stderr.npy, ambiguous.npy, "
@@ -182,6 +197,10 @@ def run_photo(args) -> int:
           f"{np.round(res.white_balance, 4).tolist()}, reduced chi2 {res.robust_chi2:.3g} "
           f"(robust; mean {res.reduced_chi2:.3g}); "
           f"{res.pixels_per_second:.0f} pixels/s")
+    if gltf is not None:
+        from ._output import gltf_line
+
+        print(gltf_line(gltf))
     for note in res.warnings:
         print(f"warning: {note}")
     misfit = any("reduced chi2" in note for note in res.warnings)

@@ -244,9 +244,26 @@ def check_stack(stack, name: str = "stack", wavelengths=None) -> Stack:
     if np.shape(d)[-1:] != (len(stack.eta),):
         raise ValueError(f"{name}.thickness must hold the {len(stack.eta)} layer thicknesses on "
                          f"its last axis (one per eta); got shape {np.shape(d)}")
-    eta = tuple(check_index(f"{name}.eta[{i}]", e, wavelengths) for i, e in enumerate(stack.eta))
-    return Stack(d, eta, check_index(f"{name}.eta_base", stack.eta_base, wavelengths),
-                 check_index(f"{name}.eta_outer", stack.eta_outer, wavelengths))
+    named = [(f"{name}.eta[{i}]", e) for i, e in enumerate(stack.eta)]
+    named += [(f"{name}.eta_base", stack.eta_base), (f"{name}.eta_outer", stack.eta_outer)]
+    eta = check_indices(named, wavelengths)
+    return Stack(d, tuple(eta[:-2]), eta[-2], eta[-1])
+
+
+def check_indices(named, wavelengths=None) -> list:
+    """`check_index` of every (name, index) pair; the failures, all of them, are one
+    ValueError that lists each by its name (not only the first)."""
+    out, problems = [], []
+    for n, e in named:
+        try:
+            out.append(check_index(n, e, wavelengths))
+        except ValueError as err:
+            problems.append(str(err))
+    if len(problems) == 1:
+        raise ValueError(problems[0])
+    if problems:
+        raise ValueError(f"{len(problems)} indices are out of range: " + "; ".join(problems))
+    return out
 
 
 def check_material(x, name: str = "film", wavelengths=None):
@@ -263,6 +280,9 @@ def check_material(x, name: str = "film", wavelengths=None):
             if not _is_model(v) and np.ndim(v) != 0:
                 raise ValueError(f"{name}.{k} must be a scalar when another index is a model "
                                  f"(only thickness varies per point; vmap over materials)")
+        # the Film's own field names in the messages (not those of its one-layer Stack)
+        check_indices([(f"{name}.{k}", getattr(x, k))
+                       for k in ("eta_film", "eta_base", "eta_outer")], wavelengths)
         return check_stack(Stack.from_film(x._replace(
             eta_base=x.eta_base if _is_model(x.eta_base) else x.eta_base + 1j * x.kappa_base,
             kappa_base=0.0)), name, wavelengths)

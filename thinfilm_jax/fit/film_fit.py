@@ -435,6 +435,12 @@ def fit_film(observed, theta_o, *, alpha, initial: Film | Stack,
     Residuals r = (model − observed)/σ over all angles and bands; the model is
     `patch_model` (`patch.patch_one` vmapped over θ_o) with `method`'s forward model.
 
+    The first call in a process compiles (XLA) for the shapes, dtypes and options given:
+    tens of seconds on a small CPU (27–35 s measured on a 2-core machine), then each call
+    with the same shapes runs compiled. ``thinfilm_jax.enable_compilation_cache()`` keeps the
+    compilations on disk for later processes (the ``thinfilm-jax`` command and the notebooks
+    turn it on).
+
     Args:
         observed: L_j, shape (n_angles, n_bands), as from
             ``patch_radiance(film, theta_o, alpha, method=...)``.
@@ -586,6 +592,12 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
     The model is `spectrum_model`: the exact Airy reflectance (general Fresnel path) of a
     constant `Film`, the stack code (every index at each λ) of a `Stack` or a dispersive
     `Film`.
+
+    The first call in a process compiles (XLA) for the shapes, dtypes and options given:
+    tens of seconds on a small CPU (27–35 s measured on a 2-core machine), then each call
+    with the same shapes runs compiled. ``thinfilm_jax.enable_compilation_cache()`` keeps the
+    compilations on disk for later processes (the ``thinfilm-jax`` command and the notebooks
+    turn it on).
 
     Args:
         observed: unpolarised reflectance, shape (n_angles, n_wl) (or (n_wl,) for one angle).

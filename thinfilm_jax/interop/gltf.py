@@ -26,6 +26,11 @@ the caller supplies ``eta_base=``/``kappa_base=``, a partly metallic base, and
 extension allows `iridescenceThicknessMinimum` > `…Maximum` (README: "MAY be greater"): it is
 read as written, an inverted mapping.
 
+A dispersive film (index models, SPEC §12) is written with its indices at one wavelength
+(`constant_film`, default `INDEX_WAVELENGTH_NM` = 550 nm), which the material records in
+``extras.thinfilm_jax``; its colour cost against the exact film is `constant_index_error`
+(docs/how-to/gltf.md: a soap film ΔE₀₀ mean 0.81, TiO₂ on glass 4.9).
+
 Thickness maps travel as an `iridescenceThicknessTexture` PNG written with OpenImageIO
 (`write_thickness_texture`: G channel, R = B = 0, linear — a gAMA 1.0 chunk —, minimum and
 maximum covering the map so that no code is wasted; 8-bit by default, 16-bit on request).
@@ -65,6 +70,7 @@ import numpy as np
 from ..core import _validate as V
 from ..core._io import atomic_write, write_json
 from ..core.film import Film
+from ..optics.index import is_index_model
 
 EXTENSION = "KHR_materials_iridescence"
 IOR_EXTENSION = "KHR_materials_ior"
@@ -75,6 +81,13 @@ FIELDS = (*DEFAULTS, "iridescenceIOR", "iridescenceTexture", "iridescenceThickne
           "extensions", "extras")
 #: `KHR_materials_ior` default (its schema) and glTF's default `metallicFactor`.
 DEFAULT_IOR, DEFAULT_METALLIC = 1.5, 1.0
+#: the wavelength (nm) at which a dispersive index is written as glTF's one constant IOR
+INDEX_WAVELENGTH_NM = 550.0
+#: where the written material records it (`material["extras"][EXTRAS]`)
+EXTRAS = "thinfilm_jax"
+#: the largest κ of a dispersive film index written as a real IOR (recorded in the extras):
+#: a 1 µm film loses ≤ 1 − exp(−4πκ·2d/λ) ≈ 0.5 % at 550 nm (TiO₂: κ ≈ 5e-8 at 550 nm)
+KAPPA_FILM_MAX = 1e-4
 
 
 def mix(x, y, a):
@@ -209,6 +222,78 @@ def film_from_gltf(material, *, eta_base=None, kappa_base=None, thickness_g=None
     return Film(thickness, eta_film, eta3, kappa3, 1.0), factor
 
 
+def constant_film(film: Film, wavelength_nm=INDEX_WAVELENGTH_NM) -> tuple[Film, dict]:
+    """`film` with every index model (SPEC §12) evaluated at `wavelength_nm`: glTF holds one
+    constant IOR per interface, so a dispersive film (water, TiO₂, ...) is written as its
+    indices at one wavelength. Returns (the constant film, {field: {"name", "n", "k"}} of the
+    models evaluated; empty for a film of numbers, which is returned as given).
+
+    The absorption of the base at that wavelength becomes `kappa_base` (and `film_to_gltf`
+    refuses it, as any κ₃ > 0). glTF's `iridescenceIor` is real: a film or outer index that
+    absorbs more than `KAPPA_FILM_MAX` at that wavelength is a `ValueError`; below it its κ
+    is left out of the film and kept in the record. The colour this costs is measured in
+    docs/how-to/gltf.md ("Dispersive films") with `constant_index_error`.
+
+    Example:
+        >>> from thinfilm_jax import Film, refractive_index
+        >>> film, models = constant_film(Film(300.0, refractive_index("water"), 1.0))
+        >>> round(float(film.eta_film), 4), models["eta_film"]["name"]
+        (1.3347, 'water')
+    """
+    if not isinstance(film, Film):
+        raise TypeError(f"film must be a thinfilm_jax.Film, got {type(film).__name__}")
+    names = ("eta_film", "eta_base", "eta_outer")
+    models = {k: getattr(film, k) for k in names if is_index_model(getattr(film, k))}
+    if not models:
+        return film, {}
+    wl = _number("wavelength_nm", wavelength_nm, 0.0)
+    if wl == 0:
+        raise ValueError("wavelength_nm must be > 0 nm, got 0")
+    values = {}
+    for k, model in models.items():
+        try:
+            v = complex(np.asarray(model(wl)).reshape(()))
+        except ValueError as e:
+            raise ValueError(f"film.{k} ({model.name}) at wavelength_nm = {wl:g}: {e}") from None
+        if k != "eta_base" and v.imag > KAPPA_FILM_MAX:
+            raise ValueError(f"glTF holds a real index: film.{k} ({model.name}) absorbs at "
+                             f"{wl:g} nm (kappa = {v.imag:.3g} > {KAPPA_FILM_MAX:g})")
+        values[k] = v
+    fields = {k: values[k].real for k in values}
+    if "eta_base" in values:
+        fields["kappa_base"] = float(np.asarray(film.kappa_base)) + values["eta_base"].imag
+    return film._replace(**fields), {k: {"name": m.name, "n": values[k].real,
+                                         "k": values[k].imag} for k, m in models.items()}
+
+
+def constant_index_error(film: Film, wavelength_nm=INDEX_WAVELENGTH_NM, *,
+                         thickness=np.linspace(0.0, 1000.0, 201),
+                         theta_deg=np.linspace(0.0, 80.0, 17)) -> dict:
+    """The colour cost of writing a dispersive `film` as its indices at `wavelength_nm`
+    (`constant_film`): CIEDE2000 between the exact mirror reflectance of the dispersive film
+    and of the constant one (`rgb_reflectance(method="spectral")`, Stiles–Burch bands, the
+    mirror as white, SPEC §7) over `thickness` (nm) × view angles `theta_deg`. Returns
+    {"mean", "p95", "max", "n"}: the ΔE₀₀ statistics over the grid and its size.
+
+    Example (a film of numbers costs nothing):
+        >>> constant_index_error(Film(0.0, 1.33, 1.5), thickness=[300.0], theta_deg=[0.0])
+        {'mean': 0.0, 'p95': 0.0, 'max': 0.0, 'n': 1}
+    """
+    from ..spectral.colorimetry import delta_e2000
+    from ..spectral.reflectance import rgb_reflectance
+
+    const, _ = constant_film(film, wavelength_nm)
+    d = np.asarray(thickness, float)[:, None]
+    cos = np.cos(np.deg2rad(np.asarray(theta_deg, float)))[None, :]
+    exact = np.asarray(rgb_reflectance(film._replace(thickness=jnp.asarray(d)),
+                                       jnp.asarray(cos), method="spectral"))
+    approx = np.asarray(rgb_reflectance(const._replace(thickness=jnp.asarray(d)),
+                                        jnp.asarray(cos), method="spectral"))
+    de = delta_e2000(approx, exact).reshape(-1)
+    return {"mean": float(de.mean()), "p95": float(np.percentile(de, 95)),
+            "max": float(de.max()), "n": int(de.size)}
+
+
 def _scalar(name: str, x) -> float:
     a = np.asarray(x)
     if a.size != 1:
@@ -225,10 +310,16 @@ def _alpha(alpha) -> float:
     return _number("alpha (GGX roughness)", float(a.reshape(())), 0.0, 1.0)
 
 
-def film_to_gltf(film: Film, factor=1.0, *, alpha=None) -> dict:
+def film_to_gltf(film: Film, factor=1.0, *, alpha=None,
+                 wavelength_nm=INDEX_WAVELENGTH_NM) -> dict:
     """A glTF material (dict) holding `film` exactly: `KHR_materials_iridescence` (factor, IOR
     η₂, maximum = d, no texture), `KHR_materials_ior` (η₃) and `metallicFactor` 0 (glTF's
     default 1 would make the base a metal). κ₃ > 0, η₁ ≠ 1 or η₃ < 1 → ValueError.
+
+    A dispersive film (index models, SPEC §12) is written with its indices at
+    `wavelength_nm` (default 550 nm; `constant_film`), which the material records in
+    ``extras.thinfilm_jax`` (``index_wavelength_nm`` and the models' names): glTF holds one
+    constant IOR, so this is an approximation, measured in docs/how-to/gltf.md.
 
     With ``alpha=`` (the GGX α ∈ [0, 1] of `patch_radiance`/`envmap_radiance`) it also writes
     `roughnessFactor` = √α: glTF's roughness r is perceptual, its GGX α = r² (glTF 2.0
@@ -239,6 +330,7 @@ def film_to_gltf(film: Film, factor=1.0, *, alpha=None) -> dict:
         >>> film_to_gltf(Film(350.0, 1.33, 1.52), alpha=0.25)["pbrMetallicRoughness"]
         {'metallicFactor': 0.0, 'roughnessFactor': 0.5}
     """
+    film, models = constant_film(film, wavelength_nm)
     film = V.check_film(film)
     d, eta2, eta3, kappa3, eta1 = (_scalar(k, v) for k, v in film._asdict().items())
     if kappa3 != 0:
@@ -252,11 +344,22 @@ def film_to_gltf(film: Film, factor=1.0, *, alpha=None) -> dict:
     pbr = {"metallicFactor": 0.0}
     if alpha is not None:
         pbr["roughnessFactor"] = math.sqrt(_alpha(alpha))
-    return {"pbrMetallicRoughness": pbr,
-            "extensions": {
-                EXTENSION: {"iridescenceFactor": factor, "iridescenceIor": eta2,
-                            "iridescenceThicknessMaximum": d},
-                IOR_EXTENSION: {"ior": eta3}}}
+    material = {"pbrMetallicRoughness": pbr,
+                "extensions": {
+                    EXTENSION: {"iridescenceFactor": factor, "iridescenceIor": eta2,
+                                "iridescenceThicknessMaximum": d},
+                    IOR_EXTENSION: {"ior": eta3}}}
+    material.update(_extras(models, wavelength_nm))
+    return material
+
+
+def _extras(models: dict, wavelength_nm) -> dict:
+    """The material's ``extras`` recording a dispersive film's evaluation wavelength (none
+    for a film of numbers)."""
+    if not models:
+        return {}
+    return {"extras": {EXTRAS: {"index_wavelength_nm": float(wavelength_nm),
+                                "dispersive_indices": models}}}
 
 
 def alpha_from_gltf(material) -> float:
@@ -418,14 +521,16 @@ class _Buffer:
 
 
 def _asset(film: Film, factor, alpha, base_color, bits, png_path: Path, glb: bool,
-           sphere) -> tuple[dict, bytes]:
+           sphere, wavelength_nm) -> tuple[dict, bytes]:
     """(glTF JSON document, buffer bytes) of the sphere asset (`write_gltf`)."""
+    film, models = constant_film(film, wavelength_nm)
     film = V.check_film(film)
     d = np.asarray(film.thickness)
     if d.ndim not in (0, 2) or d.size == 0:
         raise ValueError(f"film.thickness must be one value or a map (H, W), got shape "
                          f"{d.shape}")
     material = film_to_gltf(film._replace(thickness=float(d.max())), factor, alpha=alpha)
+    material.update(_extras(models, wavelength_nm))
     colour = np.asarray(base_color, float)
     if colour.shape != (3,) or not np.all((colour >= 0) & (colour <= 1)):
         raise ValueError(f"base_color must be 3 linear values in [0, 1], got {base_color!r}")
@@ -475,7 +580,8 @@ def _glb(doc: dict, data: bytes) -> bytes:
 
 
 def write_gltf(path, film: Film, factor=1.0, *, alpha=None, base_color=(0.0, 0.0, 0.0),
-               bits: int = 8, sphere: tuple[int, int] = (16, 32)) -> dict:
+               bits: int = 8, sphere: tuple[int, int] = (16, 32),
+               wavelength_nm=INDEX_WAVELENGTH_NM) -> dict:
     """Write a complete glTF 2.0 asset showing `film` on a unit sphere; returns its document.
 
     The asset: one UV sphere (`uv_sphere(*sphere)`: POSITION with its min/max, NORMAL, and
@@ -485,7 +591,9 @@ def write_gltf(path, film: Film, factor=1.0, *, alpha=None, base_color=(0.0, 0.0
     film's specular reflection alone — what `patch_radiance` computes; pass (1, 1, 1) for
     glTF's default white diffuse under the film. A thickness map (H, W) (every other field one
     value) becomes the `iridescenceThicknessTexture` (`write_thickness_texture`, its sampler
-    linear and clamped) with minimum and maximum covering the map.
+    linear and clamped) with minimum and maximum covering the map. A dispersive film is
+    written with its indices at `wavelength_nm` (default 550 nm), recorded in the material's
+    ``extras`` (`film_to_gltf`).
 
     ``path`` ending in ``.glb``: one binary file (GLB: the JSON chunk and a BIN chunk holding
     the mesh and the PNG). Otherwise JSON ``path`` beside ``<stem>.bin`` (the mesh) and
@@ -501,11 +609,12 @@ def write_gltf(path, film: Film, factor=1.0, *, alpha=None, base_color=(0.0, 0.0
 
         with tempfile.TemporaryDirectory() as tmp:
             doc, data = _asset(film, factor, alpha, base_color, bits, Path(tmp) / png.name,
-                               True, sphere)
+                               True, sphere, wavelength_nm)
         blob = _glb(doc, data)
         atomic_write(path, lambda tmp: Path(tmp).write_bytes(blob))
         return doc
-    doc, data = _asset(film, factor, alpha, base_color, bits, png, False, sphere)
+    doc, data = _asset(film, factor, alpha, base_color, bits, png, False, sphere,
+                       wavelength_nm)
     doc["buffers"][0]["uri"] = f"{path.stem}.bin"
     atomic_write(path.with_name(f"{path.stem}.bin"), lambda tmp: Path(tmp).write_bytes(data))
     write_json(path, doc)

@@ -93,6 +93,12 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
                     sources: int | None = None) -> Array:
     """Band radiances L_j (..., J) of a film under an environment map (SPEC §9).
 
+    The first call in a process compiles (XLA) for the shapes, dtypes and options given:
+    tens of seconds on a small CPU (27–35 s measured on a 2-core machine), then each call
+    with the same shapes runs compiled. ``thinfilm_jax.enable_compilation_cache()`` keeps the
+    compilations on disk for later processes (the ``thinfilm-jax`` command and the notebooks
+    turn it on).
+
     Args:
         film: `Film`, fields broadcasting with the shading points.
         alpha: GGX roughness α ∈ (0, 1].

@@ -90,6 +90,12 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
                    lut: ShatLUT | None = None, batch_size: int = 64) -> Array:
     """Band radiances L_j of a patch under uniform light, shape broadcast(...) + (n_bands,).
 
+    The first call in a process compiles (XLA) for the shapes, dtypes and options given:
+    tens of seconds on a small CPU (27–35 s measured on a 2-core machine), then each call
+    with the same shapes runs compiled. ``thinfilm_jax.enable_compilation_cache()`` keeps the
+    compilations on disk for later processes (the ``thinfilm-jax`` command and the notebooks
+    turn it on).
+
     Args:
         film: `Film` (fields broadcast with theta_o and alpha).
         theta_o: view angle θ_o ∈ [0, π/2] (radians).

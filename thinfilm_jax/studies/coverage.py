@@ -188,12 +188,8 @@ def _tick(progress, what, i, n, t0, out, result):
 
 
 def plot(result, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ..core._io import atomic_write
+    from . import _plot as plt  # the caller's backend untouched
 
     methods = [m for m in result["coverage"]]
     if not methods:

@@ -178,10 +178,7 @@ def _caption(cfg):
 
 def render_figure7(data: dict, cfg: Figure7Config, path) -> None:
     """The eight panels (a)–(h) as sRGB images, written atomically to `path`."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import _plot as plt  # the caller's backend untouched
 
     fig, axes = plt.subplots(2, 4, figsize=(16, 8.6), constrained_layout=True)
     letters = iter("abcdefgh")
@@ -204,10 +201,7 @@ def render_figure7(data: dict, cfg: Figure7Config, path) -> None:
 
 def render_error(data: dict, cfg: Figure7Config, path) -> None:
     """CIEDE2000 maps of each approximation against the reference (2 rows × 3 methods)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import _plot as plt  # the caller's backend untouched
 
     fig, axes = plt.subplots(2, 3, figsize=(13.5, 8.4), constrained_layout=True)
     des = {(row, m): delta_e2000(data["values"][row][m], data["values"][row]["reference"],

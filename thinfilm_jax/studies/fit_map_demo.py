@@ -187,11 +187,9 @@ def _load():
 def _figure(path, image, d, runs, summary, title, xlabel):
     import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ..core._io import atomic_write
     from ..spectral.colorimetry import bands_to_srgb
+    from . import _plot as plt  # the caller's backend untouched
 
     names = list(runs)
     fig, axes = plt.subplots(2, 3, figsize=(12, 7.6), layout="constrained")

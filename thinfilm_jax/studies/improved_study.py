@@ -485,10 +485,7 @@ def kernel_rows(cfg: StudyConfig, ref, verbose=True):
 
 
 def plot_fig7(maps, cfg: StudyConfig, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import _plot as plt  # the caller's backend untouched
 
     fig, axes = plt.subplots(2, 2, figsize=(9, 8), constrained_layout=True)
     ext = {"figure7 roughness": ([0, 90, 0, 1], "√α"),

@@ -30,11 +30,9 @@ def fit_groups(fits: list) -> list:
 
 
 def _pyplot():
-    """matplotlib.pyplot on the Agg backend (no display needed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """pyplot's calls on figures of our own (`_plot`: Agg canvas, no display needed, the
+    caller's backend untouched)."""
+    from . import _plot as plt  # the caller's backend untouched
 
     return plt
 

@@ -304,10 +304,7 @@ def write_markdown(result: dict, path: Path):
 
 
 def write_figure(result, tint_keep, theta, method_keep, path: Path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import _plot as plt  # the caller's backend untouched
 
     tint = result["schlick_tint"]
     fams = list(dict.fromkeys(r["family"] for r in tint))

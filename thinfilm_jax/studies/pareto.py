@@ -45,27 +45,25 @@ def pareto_front(times, errors):
     return front
 
 
-def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = "") -> None:
+def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = ""):
     """Error (ΔE₀₀, log) against warm time per evaluation (s, log), one panel per family,
-    Pareto front as a step line. Points carry their row number, listed beside each panel;
-    errors below `ERROR_FLOOR` (the references, exact specialisations) are drawn on the floor
-    as open markers."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Pareto front as a step line. Every point is labelled on the plot with its path (the
+    table's "path" column: method and knobs, f32 where float32), not a number keyed to a
+    list; errors below `ERROR_FLOOR` (the references, exact specialisations) are drawn on the
+    floor as open markers. Returns the figure (written to `path`)."""
+    from . import _plot as plt  # the caller's backend untouched
 
     panels = [("a", "(a) per shading point: band reflectance R_j(cos θ)",
                "warm run time per shading point (s)"),
               ("b", "(b) per patch under uniform light: L_j(θ_o, α)",
                "warm run time per patch; per shading point for the kernels (▲) (s)")]
-    fig, axes = plt.subplots(1, 2, figsize=(19, 7.5), constrained_layout=True)
+    fig, axes = plt.subplots(1, 2, figsize=(20, 9), constrained_layout=True)
     cmap = plt.get_cmap("tab10")
     for ax, (fam, ptitle, xlabel) in zip(axes, panels):
         sel = [(i, r) for i, r in enumerate(rows) if r["family"].startswith(fam)
                and "warm_s_per_eval" in r and np.isfinite(r[metric])]
         groups = sorted({r["group"] for _, r in sel})
-        legend = []
+        labels = []  # (x, y, text, colour): placed once the axes' scales are set
         for gi, g in enumerate(groups):
             pts = [(i, r) for i, r in sel if r["group"] == g]
             t = np.array([r["warm_s_per_eval"] for _, r in pts])
@@ -77,10 +75,8 @@ def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = 
             ax.scatter(t[low], np.full(low.sum(), ERROR_FLOOR), facecolors="none",
                        edgecolors=cmap(gi % 10), s=34, zorder=3, marker=marker,
                        label=None if (~low).any() else g)
-            for (i, r), x, y in zip(pts, t, np.maximum(e, ERROR_FLOOR)):
-                ax.annotate(str(i), (x, y), fontsize=7, xytext=(3, 2),
-                            textcoords="offset points")
-                legend.append(f"{i:2d} {r['path']} ({r['dtype']})")
+            labels += [(x, y, point_label(r), cmap(gi % 10))
+                       for (_, r), x, y in zip(pts, t, np.maximum(e, ERROR_FLOOR))]
         front = [r for _, r in sel if r.get("comparable", True)]
         if front:
             t = np.array([r["warm_s_per_eval"] for r in front])
@@ -91,17 +87,56 @@ def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = 
         ax.axhline(1.0, color="grey", ls=":", lw=1)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        _place_labels(ax, labels)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(f"CIEDE2000 ΔE vs float64 reference, {metric.split('_')[1]} over the "
                       f"grid (open: < {ERROR_FLOOR:g})")
         ax.set_title(ptitle, fontsize=11)
         ax.grid(True, which="both", alpha=0.25)
         ax.legend(fontsize=7, loc="lower left")
-        ax.text(1.01, 1.0, "\n".join(sorted(legend, key=lambda x: int(x.split()[0]))),
-                transform=ax.transAxes, fontsize=6.3, va="top", ha="left", family="monospace")
     fig.suptitle(title, fontsize=10)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    plt.close(fig)
+    return fig
+
+
+def _place_labels(ax, labels, fontsize: float = 6.2) -> None:
+    """Write each point's text beside it, stepping a label up or down (with a thin leader
+    line) until its box overlaps no label already written: clusters of points (the
+    filtered variants, the kernels) stay readable."""
+    ax.autoscale_view()
+    fig = ax.figure
+    pt = fig.dpi / 72.0  # display pixels per typographic point
+    h = 1.25 * fontsize * pt
+    boxes: list = []
+    for x, y, text, colour in sorted(labels, key=lambda v: (v[1], v[0]), reverse=True):
+        px, py = ax.transData.transform((x, y))
+        w = 0.56 * fontsize * pt * len(text)
+        for k in (0, -1, 1, -2, 2, -3, 3, -4, 4, -5, 5, -6, 6, -8, 8):
+            x0, y0 = px + 4 * pt, py + k * h - 0.3 * h
+            if not any(x0 < bx + bw and bx < x0 + w and y0 < by + h and by < y0 + h
+                       for bx, by, bw in boxes):
+                break
+        boxes.append((x0, y0, w))
+        ax.annotate(text, (x, y), xytext=(4, k * h / pt), textcoords="offset points",
+                    fontsize=fontsize, color=colour, va="center",
+                    arrowprops=None if k == 0 else dict(arrowstyle="-", lw=0.4,
+                                                         color=colour, alpha=0.6))
+
+
+def point_label(row) -> str:
+    """A point's text on the error-vs-time plot: the row's path, its dtype added where the
+    path does not say it.
+
+    Example:
+        >>> point_label({"path": "Fourier M=2", "dtype": "float64"})
+        'Fourier M=2'
+        >>> point_label({"path": "ideal", "dtype": "float32"})
+        'ideal (f32)'
+    """
+    path = str(row["path"])
+    if row.get("dtype") == "float32" and "f32" not in path:
+        path += " (f32)"
+    return path
 
 
 def pareto_rows(rows, fam):
@@ -117,10 +152,7 @@ def render_kernel_pareto(rows, path, title: str = "") -> None:
     """ΔE (mean and p95 panels, log) against cost per shading point (µs, log) of real-time
     kernel options (rows with "path", "group" ∈ {ideal, filtered, improved}, "us_per_point",
     "mean", "p95"; `studies.improved_study`), with the Pareto front."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import _plot as plt  # the caller's backend untouched
 
     fig, axes = plt.subplots(1, 2, figsize=(15, 6.2), constrained_layout=True)
     colours = {"ideal": "tab:grey", "filtered": "tab:blue", "improved": "tab:red"}

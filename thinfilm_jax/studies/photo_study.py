@@ -515,13 +515,10 @@ def markdown(res: dict) -> str:
 def plot(res: dict, scenes: dict, fits: dict, path: str):
     """Per shown case: the photograph, the true and fitted maps, the error map and the
     ambiguity mask; last row: the spectrum fits against optifik."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
 
     from ..core._io import atomic_write
+    from . import _plot as plt  # the caller's backend untouched
 
     by = {r["key"]: r for r in res["rows"]}
     shown = [k for k in ("a", "c-sigma", "b", "b-smooth") if k in fits]

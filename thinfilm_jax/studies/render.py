@@ -382,10 +382,7 @@ def fit_title(fig, title: str, size: float = 8.5):
 
 
 def plot_scene(results, cfg: RenderConfig, path, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import _plot as plt  # the caller's backend untouched
 
     methods = _methods(results[0], cfg)
     others = [m for m in methods if m != "reference"]

@@ -271,10 +271,7 @@ def plot_panels(path, panels, title: str, resolution: int, *, vmax: float = 20.0
     """Panels side by side: (label, image) with an (H, W, 3) sRGB image or an (H, W) ΔE₀₀ map
     (magma, 0 … `vmax`, one colour bar); the title is wrapped to the figure's width and shrunk
     until it fits. Returns the PNG's (width, height) in pixels."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import _plot as plt  # the caller's backend untouched
 
     side = panel_inches(resolution)
     has_bar = any(np.ndim(im) == 2 for _, im in panels)
@@ -356,7 +353,14 @@ def _background(env, dirs, observer):
 
 
 def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
-    """Band images (R, R, J) per method (NaN off the sphere), mask, background, seconds."""
+    """Band images (R, R, J) per method (NaN off the sphere), mask, background, timings, notes.
+
+    Timings per method (`render.json`'s "seconds", "prefilter_seconds", "warm_seconds"): the
+    first shading call, compilation included; the map's prefiltering (real-time methods, once
+    per kind of map; not in the others); and a second, warm call of the same shading (real-time
+    methods; the reference's warm time is its chunks after the first, compiled, scaled to all
+    points, when there are two chunks or more, else absent).
+    """
     from tqdm.auto import tqdm
 
     from ..shading.envmap import downsample
@@ -368,6 +372,7 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
     n, view = p[mask], -dirs[mask]
     cache: dict = {"map": {"env": env}}
     images, seconds, notes = {}, {}, {}
+    prefilter, warm = {}, {}
     for m in cfg.methods:
         t0 = time.perf_counter()
         if METHOD_INFO[m].exact:
@@ -380,8 +385,11 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
             chunk = min(CHUNK, len(n))
             steps = range(0, len(n), chunk)
             grazing = 0
+            t_first = None
             for s in tqdm(steps, desc=f"render {m}", unit="chunk",
                           disable=not progress or len(steps) < 2):
+                if s == chunk:  # the first chunk done: the rest run compiled
+                    t_first = time.perf_counter()
                 k = min(chunk, len(n) - s)
                 # one shape, one compile: pad with the chunk's least oblique point (the pads
                 # do not count among the reference's grazing points)
@@ -397,6 +405,8 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
                         grazing += w.message.count
                     else:
                         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            if t_first is not None:  # chunks after the first, as if they covered every point
+                warm[m] = (time.perf_counter() - t_first) * len(n) / (len(n) - chunk)
             if grazing:
                 notes[m] = "; ".join(filter(None, [notes.get(m), (
                     f"{grazing} silhouette points where the view is so oblique that the lobe "
@@ -404,17 +414,28 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
                     "(ibl_reference, 'Grazing views')")]))
         else:
             pref = method_map(cache, "map", m, cfg.observer)
+            prefilter[m] = time.perf_counter() - t0  # 0 when an earlier method built it
             obs = DEFAULT_OBSERVER if m == "khr" else cfg.observer
             opts = REALTIME_OPTIONS._replace(bin_reads=cfg.bin_reads,
                                              light_spread=cfg.light_spread)
-            out = np.asarray(envmap_radiance(cfg.material, cfg.alpha, n, view, pref, method=m,
-                                             observer=obs, options=opts))
-            out = method_bands(m, out, cfg.observer)
-        seconds[m] = time.perf_counter() - t0
+
+            def shade(pref=pref, obs=obs, opts=opts, m=m):
+                return np.asarray(envmap_radiance(cfg.material, cfg.alpha, n, view, pref,
+                                                  method=m, observer=obs, options=opts))
+
+            t0 = time.perf_counter()
+            out = method_bands(m, shade(), cfg.observer)
+            seconds[m] = time.perf_counter() - t0
+            t1 = time.perf_counter()
+            shade()  # the second call: compiled, warm
+            warm[m] = time.perf_counter() - t1
+        if m not in seconds:
+            seconds[m] = time.perf_counter() - t0
         img = np.full(mask.shape + (out.shape[-1],), np.nan)
         img[mask] = out
         images[m] = img
-    return images, mask, _background(env, dirs, cfg.observer), seconds, notes
+    timing = {"seconds": seconds, "prefilter_seconds": prefilter, "warm_seconds": warm}
+    return images, mask, _background(env, dirs, cfg.observer), timing, notes
 
 
 def bubble_thickness(z, top: float = 30.0, bottom: float = 1200.0):
@@ -519,14 +540,15 @@ def render_scene(cfg: SceneConfig, out_dir=None, progress: bool = True) -> dict:
     obs = cfg.observer
     notes: dict = {}
     if cfg.scene == "sphere":
-        images, mask, background, seconds, notes = shade_sphere(cfg, env, progress)
+        images, mask, background, timing, notes = shade_sphere(cfg, env, progress)
         what = describe(cfg.material)
         title = f"{what}, GGX α = {cfg.alpha:g} under {map_label(cfg.envmap)}, {cfg.resolution} px"
         extra = {}
     else:
         t0 = time.perf_counter()
         img, mask, background, dmap = shade_bubble(cfg, env, progress)
-        seconds = {"bubble": time.perf_counter() - t0}
+        timing = {"seconds": {"bubble": time.perf_counter() - t0}, "prefilter_seconds": {},
+                  "warm_seconds": {}}
         images = {"bubble": img}
         eta = cfg.eta_film if isinstance(cfg.eta_film, str) else describe(cfg.eta_film)
         what = (f"soap bubble: air | {eta} | air, d = {cfg.thickness_top:g} + "
@@ -544,7 +566,7 @@ def render_scene(cfg: SceneConfig, out_dir=None, progress: bool = True) -> dict:
         files.append(write_exr(out / f"{m}.exr", bands_to_rec709(full, obs)))
         srgb = bands_to_srgb(full * exposure, obs)
         files.append(write_png(out / f"{m}.png", srgb))
-        panels.append((f"{m}\n{int(mask.sum()) / seconds[m]:,.0f} points/s", srgb))
+        panels.append((f"{m}\n{throughput_label(timing, m, int(mask.sum()))}", srgb))
     de_maps = {}
     if "reference" in images:
         ref = images["reference"][mask] * exposure
@@ -581,7 +603,14 @@ def render_scene(cfg: SceneConfig, out_dir=None, progress: bool = True) -> dict:
         "envmap_shape": list(env.shape), "resolution": cfg.resolution,
         "observer": obs, "exposure": exposure, "points": int(mask.sum()),
         "alpha": cfg.alpha if cfg.scene == "sphere" else None,
-        "material": what, "methods": list(images), "seconds": seconds, "notes": notes,
+        "material": what, "methods": list(images), **timing,
+        "timing": ("seconds: each method's first call, compilation included, prefiltering "
+                   "not; prefilter_seconds: the real-time methods' map prefiltering; "
+                   "warm_seconds: the same shading called again, compiled (points/s = "
+                   "points / warm_seconds)"),
+        "points_per_second_warm": {m: int(mask.sum()) / t
+                                   for m, t in timing["warm_seconds"].items()},
+        "notes": notes,
         "dE2000": errors, "composite_pixels": list(size),
         "bands": "the observer's bands, unit area (a perfect mirror under a white map is 1)",
         "exr": "linear sRGB (Rec. 709, D65), unexposed; png: sRGB at the exposure",
@@ -593,21 +622,119 @@ def render_scene(cfg: SceneConfig, out_dir=None, progress: bool = True) -> dict:
     return summary
 
 
+def throughput_label(timing: dict, m: str, points: int) -> str:
+    """A composite panel's throughput: warm points/s where a warm time was measured, else
+    the first call's, labelled as including compilation."""
+    warm = timing["warm_seconds"].get(m)
+    if warm:
+        return f"{points / warm:,.0f} points/s warm"
+    return f"{points / timing['seconds'][m]:,.0f} points/s (first call, incl. compile)"
+
+
 def format_summary(summary: dict) -> str:
-    """The command's table: seconds, points/s and ΔE₀₀ per method."""
-    lines = [f"{'method':10s} {'seconds':>8s} {'pts/s':>9s} {'ΔE mean':>8s} {'ΔE p95':>8s} "
-             f"{'ΔE max':>8s}"]
+    """The command's table per method: the first call's seconds (compilation included), the
+    prefiltering's seconds, warm seconds and warm points/s (— where not measured), ΔE₀₀."""
+    lines = [f"{'method':10s} {'first s':>8s} {'prefilt s':>9s} {'warm s':>8s} "
+             f"{'warm pts/s':>10s} {'ΔE mean':>8s} {'ΔE p95':>8s} {'ΔE max':>8s}"]
+    dash = "—"
     for m, t in summary["seconds"].items():
         de = summary["dE2000"].get(m)
         err = (f"{de['mean']:8.2f} {de['p95']:8.2f} {de['max']:8.2f}" if de
-               else f"{'—':>8s} {'—':>8s} {'—':>8s}")
-        lines.append(f"{m:10s} {t:8.1f} {summary['points'] / t:9.0f} {err}")
+               else f"{dash:>8s} {dash:>8s} {dash:>8s}")
+        pre = summary.get("prefilter_seconds", {}).get(m)
+        warm = summary.get("warm_seconds", {}).get(m)
+        pre = f"{pre:9.2f}" if pre is not None else f"{dash:>9s}"
+        rate = f"{summary['points'] / warm:10.0f}" if warm else f"{dash:>10s}"
+        warm = f"{warm:8.2f}" if warm else f"{dash:>8s}"
+        lines.append(f"{m:10s} {t:8.1f} {pre} {warm} {rate} {err}")
     return "\n".join(lines)
 
 
+#: the settings each scene uses (besides `COMMON_FIELDS`): `render.json` records these alone
+SCENE_FIELDS = {"sphere": ("material", "alpha", "methods", "bin_reads", "light_spread"),
+                "bubble": ("eta_film", "thickness_top", "thickness_bottom", "orders")}
+COMMON_FIELDS = ("scene", "envmap", "resolution", "exposure", "observer", "elevation_deg",
+                 "ldr_srgb")
+
+
+def index_json(x):
+    """An index as JSON: a real number, ``{"n", "k"}`` of a complex or constant one, or the
+    name of a bundled material (`MATERIALS`); a model read from a file keeps its name under
+    ``"file"`` (it is not re-loadable from the record: give the file again)."""
+    from ..optics.index import ConstantIndex
+
+    if isinstance(x, ConstantIndex):
+        x = complex(np.asarray(x(550.0)).reshape(()))
+    if is_index_model(x):
+        return x.name if x.name in MATERIALS else {"file": x.name}
+    if isinstance(x, str):
+        return x
+    v = complex(np.asarray(x).reshape(()))
+    return v.real if v.imag == 0 else {"n": v.real, "k": v.imag}
+
+
+def index_from_json(v):
+    """The inverse of `index_json`: a float, a complex or an index model."""
+    if isinstance(v, dict) and "file" in v:
+        raise ValueError(f"the record names an index read from a file ({v['file']!r}): it "
+                         "cannot be re-loaded from the record, give the file again")
+    if isinstance(v, dict):
+        return complex(v["n"], v["k"]) if v["k"] else float(v["n"])
+    if isinstance(v, str):
+        return parse_index(v)
+    return float(v)
+
+
+def material_json(x) -> dict:
+    """A `Film` or `Stack` of `make_material` as JSON that `material_from_json` reads back:
+    its layers as [index, thickness nm] (layer 0 facing the outer medium), base, outer
+    medium, and the `describe` text."""
+    if isinstance(x, Stack):
+        layers = [[index_json(e), float(d)] for e, d in zip(x.eta, np.asarray(x.thickness))]
+        base = index_json(x.eta_base)
+    else:
+        layers = [[index_json(x.eta_film), float(np.asarray(x.thickness))]]
+        kappa = float(np.asarray(x.kappa_base))
+        base = index_json(x.eta_base if not kappa else
+                          complex(float(np.asarray(x.eta_base)), kappa))
+    return {"layers": layers, "eta_base": base, "eta_outer": index_json(x.eta_outer),
+            "description": describe(x)}
+
+
+def material_from_json(d: dict):
+    """The `Film` or `Stack` that `material_json` recorded."""
+    layers = [(index_from_json(e), float(t)) for e, t in d["layers"]]
+    return make_material(layers=layers, eta_base=index_from_json(d["eta_base"]),
+                         eta_outer=index_from_json(d["eta_outer"]))
+
+
 def config_dict(cfg: SceneConfig) -> dict:
-    """The settings as JSON-able values."""
-    d = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
-    d["material"] = describe(cfg.material)
-    d["eta_film"] = cfg.eta_film if isinstance(cfg.eta_film, str) else describe(cfg.eta_film)
+    """The settings as JSON-able values: those common to both scenes and those of the scene
+    rendered (`SCENE_FIELDS`), each as it was rendered; `config_from_dict` reads it back.
+
+    Example (a bubble records its film, not the sphere's default material):
+        >>> d = config_dict(SceneConfig(scene="bubble"))
+        >>> "material" in d, d["eta_film"], d["thickness_top"]
+        (False, 'water', 30.0)
+    """
+    d = {k: getattr(cfg, k) for k in COMMON_FIELDS + SCENE_FIELDS[cfg.scene]}
+    d["envmap"] = str(cfg.envmap)
+    if "material" in d:
+        d["material"] = material_json(cfg.material)
+        d["methods"] = list(cfg.methods)
+    if "eta_film" in d:
+        d["eta_film"] = index_json(cfg.eta_film)
     return d
+
+
+def config_from_dict(d: dict) -> SceneConfig:
+    """The `SceneConfig` of a ``render.json``'s ``"config"`` (`config_dict`): rendering it
+    again gives the same images."""
+    kw = dict(d)
+    if "material" in kw:
+        kw["material"] = material_from_json(kw["material"])
+    if "methods" in kw:
+        kw["methods"] = tuple(kw["methods"])
+    if "eta_film" in kw and not (isinstance(kw["eta_film"], str) and kw["eta_film"] in MATERIALS):
+        kw["eta_film"] = index_from_json(kw["eta_film"])  # a bundled name stays a name
+    return SceneConfig(**kw)

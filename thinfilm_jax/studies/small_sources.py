@@ -676,12 +676,8 @@ def bins_markdown(result) -> str:
 
 
 def plot_maps(path, names):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ..core._io import atomic_write
+    from . import _plot as plt  # the caller's backend untouched
 
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.3 * len(names)),
                              layout="constrained", squeeze=False)

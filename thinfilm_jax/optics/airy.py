@@ -22,6 +22,7 @@ from jax import Array
 from ..core import _validate as V
 from ..core.film import Film
 from .fresnel import Interfaces, film_interfaces
+from .index import is_index_model
 
 
 def choose_arithmetic(film: Film, arithmetic: str = "auto") -> str:
@@ -171,7 +172,10 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, arithmetic: str = "au
 
     Args:
         film: `Film`; fields broadcast with the other arguments (a complex `eta_base` is
-            read as η₃ + iκ₃, `Film.real_base`).
+            read as η₃ + iκ₃, `Film.real_base`). An index may be an index model
+            (`refractive_index`, SPEC §12): it is evaluated at each wavelength (the film's
+            one-layer `Stack`, `stack_reflectance`; thickness may vary, the indices are
+            shared).
         cos_theta: cos θ₁ ∈ [0, 1] in the outer medium (excursions of a few ulps, e.g.
             float32 cos(π/2) = −4.4e-8, are clamped).
         wavelength: λ in nm (> 0).
@@ -185,6 +189,13 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, arithmetic: str = "au
         >>> round(float(airy_reflectance(Film(0.0, 1.5, 1.5), 1.0, 550.0)), 12)  # glass, 4 %
         0.04
     """
+    if isinstance(film, Film) and any(is_index_model(getattr(film, k))
+                                      for k in ("eta_film", "eta_base", "eta_outer")):
+        # index models (SPEC §12): each evaluated at every wavelength, by the one-layer
+        # stack's recursion (the same R as §2 to 1e-12; `arithmetic` does not apply)
+        from .stack import stack_reflectance
+
+        return stack_reflectance(V.check_material(film), cos_theta, wavelength)
     film = V.check_film(film)
     cos_theta = V.check_cos_theta(cos_theta)
     wavelength = V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")

@@ -92,7 +92,7 @@ def test_sphere_improved_takes_the_map_options(sky, tmp_path):
 OPTION_VALUES = {"--thickness": ["500"], "--eta-film": ["1.33"], "--eta-base": ["2.5"],
                  "--layers": ["SiO2:250"], "--alpha": ["0.3"],
                  "--thickness-range": ["100", "800"], "--elevation": ["20"],
-                 "--bin-reads": ["2"], "--light-spread": []}
+                 "--bin-reads": ["2"], "--light-spread": [], "--quality": ["fast"]}
 
 
 def test_each_scene_refuses_the_options_it_does_not_take(tmp_path, capsys):
@@ -110,7 +110,7 @@ def test_each_scene_refuses_the_options_it_does_not_take(tmp_path, capsys):
             assert e.value.code == 2
             assert option in capsys.readouterr().err, (option, scene)
             refused += 1
-    assert refused == 16
+    assert refused == 18
 
 
 def test_each_scene_uses_the_options_it_takes(tmp_path, monkeypatch):
@@ -140,7 +140,13 @@ def test_each_scene_uses_the_options_it_takes(tmp_path, monkeypatch):
                 assert config(scene, [option, *OPTION_VALUES[option]]) != default, (option,
                                                                                     scene)
                 used += 1
-    assert used == 11
+    assert used == 12
+    for quality in ("fast", "default", "accurate"):  # --quality is SceneConfig.quality
+        assert config("sphere", ["--quality", quality]).quality == quality
+    with pytest.raises(SystemExit):  # the preset's reads and --bin-reads: give one
+        main(["render", "--out", str(tmp_path / "x"), "--quality", "fast", "--bin-reads", "2"])
+    with pytest.raises(SystemExit):
+        main(["render", "--out", str(tmp_path / "x"), "--quality", "best"])
 
 
 def test_bad_material_and_incapable_method_are_usage_errors(capsys):

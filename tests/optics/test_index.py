@@ -453,3 +453,26 @@ def test_gradient_wrt_table_values_is_the_interpolation_weights():
     gn, gk = jax.grad(f, argnums=(0, 1))(n, k)
     np.testing.assert_allclose(gn, [0.4, 0.6, 0.0], atol=1e-15)
     np.testing.assert_allclose(gk, [1.2, 1.8, 0.0], atol=1e-15)
+
+
+def test_bundled_materials_first_built_inside_jit():
+    """The bundled materials are cached per process (`materials._bundled`); one first asked
+    for inside `jit` is built concretely, so the cache holds no tracer of that trace and a
+    later jit(grad) and eager call work (a leaked tracer raised UnexpectedTracerError)."""
+    from thinfilm_jax.optics import materials
+
+    materials._bundled.cache_clear()
+    try:
+        def f(lam):
+            return jnp.real(refractive_index("Si")(lam) + refractive_index("SiO2")(lam))
+
+        value = jax.jit(f)(600.0)
+        for name in ("Si", "SiO2"):
+            assert not any(isinstance(x, jax.core.Tracer)
+                           for x in jax.tree.leaves(materials._bundled(name)))
+        np.testing.assert_allclose(jax.jit(f)(600.0), f(600.0), rtol=1e-12)
+        np.testing.assert_allclose(value, f(600.0), rtol=1e-12)
+        g = jax.jit(jax.grad(f))(600.0)
+        assert np.isfinite(float(g)) and float(g) != 0.0
+    finally:
+        materials._bundled.cache_clear()

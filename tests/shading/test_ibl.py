@@ -619,3 +619,34 @@ def test_improved_bins_option(constant):
         with pytest.raises(ValueError, match="bin_reads"):
             envmap_radiance(FILM, 0.25, Z, v, constant[1], method="improved",
                             options=ModelOptions(shat="lut", bin_reads=bad))
+
+
+def test_explicit_options_equal_to_the_default_give_the_default_program(constant, monkeypatch):
+    """`ModelOptions(bins=3)` spells the default K: `envmap_radiance(..., options=...)` must
+    lower to the same program as no options at all (its Ŝ source "auto" is the map's table
+    here, not the exact quadrature that made it 9-14x slower a point), while another K is
+    another program whose (θ_o, α) tables are built once, not per call. Without timing: the
+    lowered HLO text of the real-time entry, and the bin tables' cache counts."""
+    from thinfilm_jax.realtime import improved
+    from thinfilm_jax.realtime.options import check_options
+    from thinfilm_jax.shading import ibl
+
+    assert ModelOptions() == ModelOptions(bins=3)
+    assert check_options(ModelOptions(), shat_auto="lut") == ibl.REALTIME_OPTIONS.checked()
+    assert check_options(ModelOptions()).shat == "exact"  # uniform light: as before
+    real = ibl._realtime_jit
+    monkeypatch.setattr(ibl, "_realtime_jit", lambda *a: real.lower(*a).as_text())
+    v = view_at(np.array([0.0, 0.7]), phi=0.3)
+
+    def hlo(**kw):
+        return envmap_radiance(FILM, 0.25, Z, v, constant[1], method="improved", **kw)
+
+    default = hlo()
+    assert hlo(options=ModelOptions(bins=3)) == default
+    assert hlo(options=ModelOptions()) == default
+    assert hlo(options=ModelOptions(shat="exact")) != default  # an explicit choice holds
+    hlo(options=ModelOptions(bins=2))
+    before = improved._bin_table_cached.cache_info()
+    assert hlo(options=ModelOptions(bins=2)) != default
+    after = improved._bin_table_cached.cache_info()
+    assert after.misses == before.misses and after.hits > before.hits

@@ -109,6 +109,8 @@ def as_array(name: str, x):
     Anything else (a string, None, a dict, a ragged list) raises a TypeError naming `name`.
     """
     if isinstance(x, (list, tuple)):
+        if any(not is_concrete(v) for v in jax.tree.leaves(x)):  # traced entries (grad, jit):
+            return jnp.asarray(x, jnp.result_type(*jax.tree.leaves(x), float))  # no checks
         try:
             a = np.asarray(x)
         except ValueError:

@@ -81,7 +81,7 @@ from .options import (
 __all__ = ["MapResult", "estimate_noise", "fit_envmap_map", "fit_patch_map", "render_patch_map"]
 
 #: The map model's defaults: the real-time `filtered` path, small quadrature (its moments).
-MAP_OPTIONS = ModelOptions(quadrature=(8, 8), arithmetic="complex")
+MAP_OPTIONS = ModelOptions(shat="exact", quadrature=(8, 8), arithmetic="complex")
 
 
 class MapResult(NamedTuple):
@@ -294,11 +294,11 @@ def _fit_options(options) -> dict:
     return dict(options.bounds or ())
 
 
-def _model_options(model_options) -> ModelOptions:
+def _model_options(model_options, shat_auto: str = "exact") -> ModelOptions:
     if not isinstance(model_options, ModelOptions):
         raise ValueError(f"model_options must be a thinfilm_jax.ModelOptions, got "
                          f"{type(model_options).__name__}")
-    return model_options.checked()
+    return model_options.checked(shat_auto)
 
 
 def _misfit(loss, n_bands, p):
@@ -640,7 +640,7 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
     free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
                              sweeps, chunk, options)
     model_options = _model_options(REALTIME_OPTIONS if model_options is None
-                                   else model_options)
+                                   else model_options, shat_auto="lut")  # the map's table
     if not isinstance(prefiltered, PrefilteredEnvMap):
         raise ValueError(f"prefiltered must be a PrefilteredEnvMap (prefilter_envmap), got "
                          f"{type(prefiltered).__name__}")

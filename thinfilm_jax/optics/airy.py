@@ -22,6 +22,8 @@ from jax import Array
 from ..core import _validate as V
 from ..core.film import Film
 from .fresnel import Interfaces, film_interfaces
+from .index import is_index_model
+from .turns import sincos_turns
 
 
 def choose_arithmetic(film: Film, arithmetic: str = "auto") -> str:
@@ -56,62 +58,6 @@ def choose_arithmetic(film: Film, arithmetic: str = "auto") -> str:
     if np.all(k == 0) and np.all(e2 >= e1) and np.all(e3 >= e1):
         return "real"
     return "complex"
-
-
-def _taylor(n: int, odd: bool) -> tuple:
-    """Taylor coefficients of sin(x)/x − 1 (odd) or cos(x) − 1 in powers of z = x², z¹ … zⁿ."""
-    return tuple((-1.0) ** k / math.factorial(2 * k + odd) for k in range(1, n + 1))
-
-
-# Truncation error of the series at |x| = π/4 (first omitted term): float64 sin to x¹⁵,
-# cos to x¹⁶: ≤ 4.6e-17, 2e-18 (< ½ ulp of 1); float32 sin to x⁹, cos to x¹⁰: ≤ 1.8e-9, 1.2e-10.
-_SIN = {8: _taylor(7, True), 4: _taylor(4, True)}
-_COS = {8: _taylor(8, False), 4: _taylor(5, False)}
-
-
-def _poly(coeffs, z):
-    acc = coeffs[-1]
-    for a in reversed(coeffs[:-1]):
-        acc = acc * z + a
-    return acc * z
-
-
-@jax.custom_jvp
-def sincos_turns(u: Array) -> tuple[Array, Array]:
-    r"""(cos 2πu, sin 2πu) for real `u` in turns, vectorisable (no libm call).
-
-    Range reduction in turns is exact in floating point: r = u − round(u) ∈ [−½, ½], then
-    the quadrant m = round(4r) ∈ {−2, …, 2} and f = r − m/4 ∈ [−⅛, ⅛] (both exact for
-    |u| < 2^(p−1)), x = 2πf ∈ [−π/4, π/4] with one rounding. sin x and cos x are their Taylor
-    series, truncated below ½ ulp (float64 to x¹⁵ / x¹⁶), and the quadrant rotates
-    (cos, sin) by m·90°. Errors ≤ 2 ulp of 1 against NumPy for any u (tests/optics/test_sincos.py).
-    The derivative is exact calculus, d(cos, sin)/du = 2π(−sin, cos) (custom JVP).
-
-    Example:
-        >>> c, s = sincos_turns(jnp.array([0.0, 0.125, 0.75]))
-        >>> [round(float(v), 12) for v in c], [round(float(v), 12) for v in s]
-        ([1.0, 0.707106781187, 0.0], [0.0, 0.707106781187, -1.0])
-    """
-    u = jnp.asarray(u)
-    key = 8 if jnp.finfo(u.dtype).bits > 32 else 4
-    r = u - jnp.round(u)
-    m = jnp.round(4.0 * r)
-    x = (2.0 * math.pi) * (r - 0.25 * m)
-    z = x * x
-    s = x + x * _poly(_SIN[key], z)
-    c = 1.0 + _poly(_COS[key], z)
-    odd = jnp.abs(m) == 1.0  # ±90°: swap
-    c, s = jnp.where(odd, s, c), jnp.where(odd, c, s)
-    c = jnp.where((m == 1.0) | (jnp.abs(m) == 2.0), -c, c)
-    s = jnp.where((m == -1.0) | (jnp.abs(m) == 2.0), -s, s)
-    return c, s
-
-
-@sincos_turns.defjvp
-def _sincos_turns_jvp(primals, tangents):
-    c, s = sincos_turns(primals[0])
-    du = (2.0 * math.pi) * tangents[0]
-    return (c, s), (-s * du, c * du)
 
 
 def polarised_reflectance(ifc: Interfaces, thickness, wavelength) -> Array:
@@ -171,7 +117,10 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, arithmetic: str = "au
 
     Args:
         film: `Film`; fields broadcast with the other arguments (a complex `eta_base` is
-            read as η₃ + iκ₃, `Film.real_base`).
+            read as η₃ + iκ₃, `Film.real_base`). An index may be an index model
+            (`refractive_index`, SPEC §12): it is evaluated at each wavelength (the film's
+            one-layer `Stack`, `stack_reflectance`; thickness may vary, the indices are
+            shared).
         cos_theta: cos θ₁ ∈ [0, 1] in the outer medium (excursions of a few ulps, e.g.
             float32 cos(π/2) = −4.4e-8, are clamped).
         wavelength: λ in nm (> 0).
@@ -185,6 +134,13 @@ def airy_reflectance(film: Film, cos_theta, wavelength, *, arithmetic: str = "au
         >>> round(float(airy_reflectance(Film(0.0, 1.5, 1.5), 1.0, 550.0)), 12)  # glass, 4 %
         0.04
     """
+    if isinstance(film, Film) and any(is_index_model(getattr(film, k))
+                                      for k in ("eta_film", "eta_base", "eta_outer")):
+        # index models (SPEC §12): each evaluated at every wavelength, by the one-layer
+        # stack's recursion (the same R as §2 to 1e-12; `arithmetic` does not apply)
+        from .stack import stack_reflectance
+
+        return stack_reflectance(V.check_material(film), cos_theta, wavelength)
     film = V.check_film(film)
     cos_theta = V.check_cos_theta(cos_theta)
     wavelength = V.check_range("wavelength", wavelength, 0.0, lo_open=True, why=" (nm)")

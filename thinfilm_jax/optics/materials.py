@@ -126,12 +126,17 @@ def _lookup(name: str) -> str | None:
 
 @functools.lru_cache(maxsize=None)
 def _bundled(name: str) -> IndexModel:
+    """The bundled material `name`, built once per process. Built concretely
+    (`jax.ensure_compile_time_eval`) also when first asked for inside a trace: under `jit` its
+    tables' conversions would be staged into that trace and the cache would keep its tracers
+    (UnexpectedTracerError in the next transform)."""
     mat = MATERIALS[name]
-    if mat.source.startswith("formula "):
-        return FormulaIndex(int(mat.source.split()[1]), np.asarray(mat.coefficients),
-                            mat.wavelength_range, name=name, citation=mat.citation)
-    with importlib.resources.as_file(_data_file(mat.source)) as path:
-        return read_csv(path, name=name, citation=mat.citation)
+    with jax.ensure_compile_time_eval():
+        if mat.source.startswith("formula "):
+            return FormulaIndex(int(mat.source.split()[1]), np.asarray(mat.coefficients),
+                                mat.wavelength_range, name=name, citation=mat.citation)
+        with importlib.resources.as_file(_data_file(mat.source)) as path:
+            return read_csv(path, name=name, citation=mat.citation)
 
 
 def refractive_index(source) -> IndexModel:

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from ..core import _validate as V
-from .airy import sincos_turns
+from .turns import sincos_turns
 from ..core.film import Film
 from .fresnel import as_complex, film_interfaces, safe_div, sqrt_upper_parts
 

@@ -77,7 +77,7 @@ from jax import Array
 
 from ..core import _validate as V
 from ..core.stack import Stack
-from .airy import sincos_turns
+from .turns import sincos_turns
 from .fresnel import complex_dtype, interface_amplitudes, sin2_outer, sqrt_upper
 from .index import index_at, is_index_model
 

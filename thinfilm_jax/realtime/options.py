@@ -8,7 +8,7 @@ library's: each name means one thing everywhere.
 | field | values | meaning |
 |---|---|---|
 | ``terms`` | int ≥ 0 | M, Fourier orders of the real-time methods (BB17 K 4, K 29) |
-| ``shat`` | "exact" · "lut" · "gaussian" | source of the band spectrum Ŝ_j(μ, σ²) (SPEC §5) |
+| ``shat`` | "auto" · "exact" · "lut" · "gaussian" | source of the band spectrum Ŝ_j(μ, σ²) (SPEC §5) |
 | ``ndf`` | "ggx" · "beckmann" | microfacet normal distribution (the IBL methods: GGX) |
 | ``quadrature`` | (n_u ≥ 1, n_φ ≥ 2) | orders of the half-vector patch quadrature |
 | ``arithmetic`` | "auto" · "real" · "complex" | Fresnel arithmetic (a scene specialisation) |
@@ -17,6 +17,10 @@ library's: each name means one thing everywhere.
 | ``light_spread`` | bool (False) | `improved` under a map: bins' spreads follow the light |
 | ``bin_reads`` | int ≥ 1 (1) | `improved` under a map: prefiltered reads per bin |
 
+``shat="auto"`` (the default) is each entry point's own default: "exact" under uniform
+light (`patch_radiance`, the fits) and "lut" under a map (`envmap_radiance`: the
+prefiltered map's table), so that ``ModelOptions(bins=2)`` changes K only, and an options
+object equal to the default gives the default's program (`checked(shat_auto=...)`).
 ``arithmetic="auto"`` picks the real (dielectric) path when the concrete film allows it
 (κ₃ = 0, η₂, η₃ ≥ η₁) and the complex one otherwise or under `jit`, where the caller forces
 ``"real"`` to specialise (see `airy.choose_arithmetic`); ``layer="auto"`` likewise picks the
@@ -40,10 +44,27 @@ small bright sources. It costs ≈ 55 ns a read a point on a 2-core CPU (g = 3: 
 default); its measured errors are in docs/studies/improved.md, "Choosing K". Under uniform
 light it changes nothing.
 
+Three named quality settings of `improved` (`ModelOptions.preset(name)`, the render CLI's
+``--quality``), measured in one run (figures/improved_bins.md; docs/studies/improved.md,
+"Choosing K"): cost a shading point under a map against `filtered`'s (float32, 2¹⁸ points,
+jitted, a 2-core CPU) and the error over the 18 renders of the small-sources study (the
+worst ratio of mean ΔE₀₀ to `filtered`'s, and how many renders stay above 3 mean ΔE₀₀):
+
+| preset | options | cost ÷ `filtered` | worst ΔE₀₀ ratio / renders > 3 |
+|---|---|---|---|
+| "fast" | ``bins=2`` | 1.50× | 0.84 / 5 |
+| "default" | ``ModelOptions()`` (K = 3) | 2.32× | 0.70 / 2 |
+| "accurate" | ``bin_reads=3`` (K = 3) | 4.64× | 0.56 / 0 |
+
+Under uniform light (`patch_radiance`) only K acts: "fast" is about 1.6× less accurate
+than "default" there, and "accurate" is "default" (docs/improved.md).
+
 Example:
     >>> from thinfilm_jax import ModelOptions
     >>> ModelOptions(terms=3, shat="lut").terms
     3
+    >>> ModelOptions.preset("fast").bins, ModelOptions.preset("default") == ModelOptions()
+    (2, True)
 """
 
 from __future__ import annotations
@@ -57,13 +78,17 @@ from ..brdf.microfacet import DEFAULT_QUADRATURE, NDFS
 from ..spectral.reflectance import LAYERS
 
 ARITHMETIC_CHOICES = ("auto", "real", "complex")
+#: the named quality settings of `improved` (module docstring): fields that differ from
+#: `ModelOptions()`
+PRESETS = {"fast": dict(bins=2), "default": {}, "accurate": dict(bin_reads=3)}
+SHAT_CHOICES = ("auto",) + SHAT_SOURCES
 
 
 class ModelOptions(NamedTuple):
     """Static model knobs (hashable; see the module docstring for the vocabulary)."""
 
     terms: int = 2
-    shat: str = "exact"
+    shat: str = "auto"
     ndf: str = "ggx"
     quadrature: tuple[int, int] = DEFAULT_QUADRATURE
     arithmetic: str = "auto"
@@ -72,23 +97,34 @@ class ModelOptions(NamedTuple):
     light_spread: bool = False
     bin_reads: int = 1
 
-    def checked(self) -> ModelOptions:
-        """The same options validated (ValueError naming the field) and normalised."""
-        V.check_choice("shat", self.shat, SHAT_SOURCES)
+    @classmethod
+    def preset(cls, name: str) -> ModelOptions:
+        """The named quality setting of `improved` (`PRESETS`, costs and errors in the
+        module docstring): "fast" (K = 2 bins), "default" (= `ModelOptions()`, K = 3) or
+        "accurate" (K = 3 with three prefiltered reads a bin). ValueError for another name."""
+        V.check_choice("preset", name, tuple(PRESETS))
+        return cls(**PRESETS[name])
+
+    def checked(self, shat_auto: str = "exact") -> ModelOptions:
+        """The same options validated (ValueError naming the field) and normalised;
+        ``shat="auto"`` becomes `shat_auto`, the caller's default Ŝ source."""
+        V.check_choice("shat", self.shat, SHAT_CHOICES)
         V.check_choice("ndf", self.ndf, NDFS)
         V.check_choice("arithmetic", self.arithmetic, ARITHMETIC_CHOICES)
         V.check_choice("layer", self.layer, LAYERS)
         if not isinstance(self.light_spread, bool):
             raise ValueError(f"light_spread must be True or False, got {self.light_spread!r}")
-        return self._replace(terms=V.check_int("terms", self.terms, 0),
+        return self._replace(shat=shat_auto if self.shat == "auto" else self.shat,
+                             terms=V.check_int("terms", self.terms, 0),
                              quadrature=V.check_quadrature(self.quadrature),
                              bins=V.check_int("bins", self.bins, 1),
                              bin_reads=V.check_int("bin_reads", self.bin_reads, 1))
 
 
-def check_options(options) -> ModelOptions:
-    """`options` as a validated `ModelOptions` (TypeError for anything else)."""
+def check_options(options, shat_auto: str = "exact") -> ModelOptions:
+    """`options` as a validated `ModelOptions` (TypeError for anything else), ``shat="auto"``
+    resolved to `shat_auto` (`ModelOptions.checked`)."""
     if not isinstance(options, ModelOptions):
         raise TypeError(f"options must be a thinfilm_jax.ModelOptions, got "
                         f"{type(options).__name__}")
-    return options.checked()
+    return options.checked(shat_auto)

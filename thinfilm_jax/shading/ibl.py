@@ -111,7 +111,8 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
             observer must stay the default, and a `PrefilteredEnvMap` with sources is
             refused: engines shade the prefiltered map only).
         observer: colour bands.
-        options: `ModelOptions` (default `REALTIME_OPTIONS`: shat="lut", the map's table):
+        options: `ModelOptions` (default `REALTIME_OPTIONS`: shat="lut", the map's table;
+            shat="auto", `ModelOptions()`'s, is "lut" here, so equal options give one program):
             terms = Fourier orders M and shat = Ŝ source of the real-time methods,
             arithmetic ("auto" specialises a concrete dielectric film), bins = K of
             `improved` (fewer: cheaper, less accurate); ndf must be "ggx" (the prefiltered
@@ -152,7 +153,7 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     if method == "khr" and observer != DEFAULT_OBSERVER:
         raise ValueError(f"method='khr' gives linear Rec. 709 RGB: observer={observer!r} "
                          f"does not apply (leave the default)")
-    options = check_options(options)
+    options = check_options(options, shat_auto="lut")  # "auto": the map's Ŝ table
     if options.ndf != "ggx":
         raise ValueError(f"envmap_radiance supports ndf='ggx' only (the prefiltered maps and "
                          f"the reference's lobe are GGX), got ndf={options.ndf!r}")

@@ -197,7 +197,8 @@ def stack_patch_one(stack: Stack, theta_o, alpha, *, method: str, observer: str,
 
 
 def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
-              options: ModelOptions = ModelOptions(arithmetic="complex", layer="film"),
+              options: ModelOptions = ModelOptions(shat="exact", arithmetic="complex",
+                                                   layer="film"),
               lut=None, table: BinTable | None = None) -> Array:
     """One patch (scalar film fields, θ_o, α) → (n_bands,). The kernel `patch_radiance` maps.
 

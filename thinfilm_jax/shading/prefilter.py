@@ -205,6 +205,17 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
     CPU; 44–45 s when every output texel summed every input texel; figures/prefilter_bench.md).
     """
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(env)):
+        raise ValueError("prefilter_envmap runs on the host and needs a concrete map, got a "
+                         "traced one (under jax.jit, vmap or grad with respect to the map): "
+                         "call prefilter_envmap outside jit and pass the PrefilteredEnvMap")
+    with jax.ensure_compile_time_eval():  # a concrete map: host tables, also under a trace
+        return _prefilter(env, observer, levels, resolution, moments, albedo_shape, dtype,
+                          sources)
+
+
+def _prefilter(env, observer, levels, resolution, moments, albedo_shape, dtype, sources):
+    """`prefilter_envmap` of a concrete `EnvMap` (arguments as there)."""
     found = None
     if sources:
         env, found = extract_sources(env, max_sources=sources)

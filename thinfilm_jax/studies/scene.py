@@ -311,9 +311,11 @@ class SceneConfig:
     observer: str = DEFAULT_OBSERVER
     elevation_deg: float | None = None  # None: 15° (sphere), 30° (bubble: its thin top shows)
     ldr_srgb: bool = False
-    # sphere, method "improved" under the map (`ModelOptions.bin_reads`, `.light_spread`)
+    # sphere, method "improved" under the map (`ModelOptions.bin_reads`, `.light_spread`,
+    # `ModelOptions.preset(quality)`: "fast", "default" or "accurate")
     bin_reads: int = 1
     light_spread: bool = False
+    quality: str = "default"
     # bubble
     eta_film: Any = "water"
     thickness_top: float = 30.0
@@ -336,6 +338,10 @@ class SceneConfig:
         from ..realtime.options import ModelOptions
 
         ModelOptions(bin_reads=self.bin_reads, light_spread=self.light_spread).checked()
+        ModelOptions.preset(self.quality)
+        if self.quality != "default" and self.bin_reads != 1:
+            raise ValueError(f"quality={self.quality!r} sets the reads per bin: give "
+                             f"bin_reads={self.bin_reads} or the quality, not both")
 
 
 def _frame(cfg: SceneConfig, env):
@@ -364,6 +370,7 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
     from tqdm.auto import tqdm
 
     from ..shading.envmap import downsample
+    from ..realtime.options import ModelOptions
     from ..shading.ibl import REALTIME_OPTIONS, envmap_radiance
     from ..shading.ibl_reference import GrazingLobeWarning, resample_factor
     from .render import method_map
@@ -416,7 +423,9 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
             pref = method_map(cache, "map", m, cfg.observer)
             prefilter[m] = time.perf_counter() - t0  # 0 when an earlier method built it
             obs = DEFAULT_OBSERVER if m == "khr" else cfg.observer
-            opts = REALTIME_OPTIONS._replace(bin_reads=cfg.bin_reads,
+            q = ModelOptions.preset(cfg.quality)  # bins and reads; bin_reads=g alone is g
+            opts = REALTIME_OPTIONS._replace(bins=q.bins, bin_reads=max(q.bin_reads,
+                                                                        cfg.bin_reads),
                                              light_spread=cfg.light_spread)
 
             def shade(pref=pref, obs=obs, opts=opts, m=m):

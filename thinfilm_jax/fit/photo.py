@@ -27,6 +27,9 @@ The fit, in the order it runs:
    regions of distinct colour). Without: alternating minimisation on a subsample of pixels,
    the nearest-colour screen given the gains and the closed-form gains given the
    thicknesses, from a ladder of starting exposures; the lowest total χ² wins.
+   With ``illumination="smooth"`` a light field L(x) (the exponential of a degree-3
+   polynomial in the pixel coordinates, `fit.photo_light`) is then fitted on a subsample,
+   alternating with the pixels' thicknesses, and the photograph divided by it.
 3. **Screen.** χ²_p(d_g) for every pixel on a coarse grid (`screen_step_nm`, every basin of
    χ²(d) holds a grid point: fringes are ≳ 100 nm wide) as one matrix product, and the k = 4
    lowest local minima of each pixel. Channels clipped at black or full scale are censored:
@@ -87,6 +90,8 @@ from ..core.stack import Stack
 from ..optics.stack import stack_reflectance_traced
 from ..spectral.camera import Camera, camera_response, sensitivity_basis
 from .engine import covariance, levenberg_marquardt
+from .photo_flags import ambiguous as flag_pixels
+from .photo_light import ILLUMINATIONS, MIN_IDENTIFIABLE, basis, fit_light
 from .photo_screen import (DISTINCT_NM, bucket, chunks, closed_gains, features,
                            matrix_from_pixels, pad_to, reference_gains, residual, screen_all,
                            search_gains)
@@ -133,6 +138,8 @@ class PhotoResult(NamedTuple):
         encoding: how the image was read (`core.image.Photo.describe`).
         camera, illuminant: the camera and light names of the model.
         n_pixels, seconds: pixels fitted and the wall time (compilation included).
+        illumination: "uniform" or "smooth"; light: the fitted light field (H, W), 1 at its
+            peak over the fitted pixels (`fit.photo_light`; all ones under uniform light).
     """
 
     thickness: np.ndarray
@@ -152,6 +159,8 @@ class PhotoResult(NamedTuple):
     illuminant: str
     n_pixels: int
     seconds: float
+    illumination: str = "uniform"
+    light: np.ndarray | None = None
 
     @property
     def pixels_per_second(self) -> float:
@@ -173,6 +182,9 @@ class PhotoResult(NamedTuple):
             "median_stderr_nm": float(np.median(self.stderr[ok])) if ok.any() else None,
             "chi2_p50_p99": [float(np.percentile(self.chi2[ok], q)) for q in (50, 99)]
             if ok.any() else None,
+            "illumination": self.illumination,
+            "light_min_max": [float(np.nanmin(self.light)), float(np.nanmax(self.light))]
+            if self.light is not None and ok.any() else None,
             "seconds": float(self.seconds), "pixels_per_second": float(self.pixels_per_second),
             "warnings": list(self.warnings),
         }
@@ -358,8 +370,8 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
               layer: int = 0, smoothness_nm=None, mask=None, bit_depth=None,
               model_floor: float | None = None, grid_step_nm: float = 1.0,
               screen_step_nm: float = 4.0, steps: int = 6,
-              chi2_warn: float = 4.0, chunk: int = 4096, progress: bool = False
-              ) -> PhotoResult:
+              chi2_warn: float = 4.0, chunk: int = 4096, progress: bool = False,
+              illumination: str = "uniform") -> PhotoResult:
     """Fit the thickness map of a photograph of a film (module docstring; SPEC §13).
 
     Args:
@@ -390,6 +402,9 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         steps: Levenberg–Marquardt steps; chi2_warn: the robust reduced χ² above which the
             fit warns;
         chunk: pixels per batch; progress: a tqdm progress bar over pixels.
+        illumination: "uniform" (one exposure for the frame) or "smooth" (a smooth positive
+            light field across the frame, the exponential of a degree-2 polynomial in the
+            pixel coordinates, fitted jointly with the map: `fit.photo_light`).
 
     Returns:
         `PhotoResult`.
@@ -408,6 +423,8 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     report_floor = model_floor if report_floor is None else report_floor
     lo, hi = _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor,
                          grid_step_nm, chi2_warn)
+    if illumination not in ILLUMINATIONS:
+        raise ValueError(f"illumination must be one of {ILLUMINATIONS}, got {illumination!r}")
     cam = camera_response(camera, illuminant)
     if not isinstance(reference, (list, tuple, type(None))):
         raise ValueError("reference must be a list of (mask, thickness_nm) pairs")
@@ -469,6 +486,11 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         cmat, cmat_se = np.eye(3), np.zeros((3, 3))
         gains = search_gains(obs, sig, cens, table[3][coarse], jnp.asarray(grid[coarse]),
                               chunk, black)
+    light = np.ones(n)
+    if illumination == "smooth":  # the field, then the photograph divided by it
+        light, gains, ident = _smooth_light(obs, sig, cens, known, basis(where, h, w),
+                                            gains, cmat, table, grid[coarse], chunk, steps)
+        obs, sig = obs / light[:, None], sig / light[:, None]
     tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
     k = _CANDIDATES
     rounds = _BASIS_ROUNDS if cam.kind == "unknown" else 0
@@ -561,10 +583,10 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     dof = max(2 * n - n_global, 1)
     robust_fit = float(np.median(chi) / _CHI2_2_MEDIAN)
     scale = np.sqrt(robust_fit)
-    amb = np.isfinite(chi_alt) & (chi_alt - chi < 4.0 * max(robust_fit, 1.0))
+    amb = flag_pixels(chi, chi_alt, robust_fit, np.any(cens > 0, axis=-1), d, where, (h, w))
     if report_floor != model_floor:
         pred = _host_hermite(d, lo, step, *table[3:5]) @ gm.T
-        sig_rep = sigma(report_floor).reshape(-1, 3)[where]
+        sig_rep = sigma(report_floor).reshape(-1, 3)[where] / light[:, None]
         chi = np.sum(np.asarray(residual(jnp.asarray(pred), jnp.asarray(obs), jnp.asarray(sig_rep),
                                           jnp.asarray(cens), black)) ** 2, axis=-1)
     rchi2 = float(np.sum(chi) / dof)
@@ -583,6 +605,12 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     if np.sum(~valid):
         notes.append(f"{int(np.sum(~valid))} pixel(s) not fitted (every channel clipped or "
                      f"outside the mask)")
+    if illumination == "smooth" and ident < MIN_IDENTIFIABLE:
+        notes.append(f"the light field is not determined (identifiability {ident:.2g} < "
+                     f"{MIN_IDENTIFIABLE:g}: the film's colours cannot tell a change of light "
+                     f"from a change of thickness): add reference regions spread over the "
+                     f"frame, or use illumination='uniform' under even light")
+        warnings.warn(notes[-1], stacklevel=2)
     if np.mean(amb) > 0.2:
         notes.append(f"{100 * np.mean(amb):.0f} % of pixels are ambiguous between fringe "
                      f"orders: add reference regions, smoothness_nm, or narrow thickness_range")
@@ -601,7 +629,31 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         camera_matrix_stderr=cmat_se, reduced_chi2=rchi2, robust_chi2=robust,
         warnings=tuple(notes),
         encoding=photo.describe(), camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
-        seconds=time.perf_counter() - t0)
+        seconds=time.perf_counter() - t0, illumination=illumination, light=full(light))
+
+
+def _smooth_light(obs, sig, cens, known, phi, gains, cmat, table, coarse, chunk, steps):
+    """`fit.photo_light.fit_light` on the table: (L (n,), gains (3,), identifiability)."""
+    lo, _, step, s_tab, ds_tab, black = table
+    feats_grid = jnp.asarray(coarse)
+    s_coarse = s_tab[np.rint((coarse - lo) / step).astype(int)]
+
+    def colour(d):
+        dd = np.stack([np.interp(d, lo + step * np.arange(len(s_tab)), ds_tab[:, c])
+                       for c in range(ds_tab.shape[1])], axis=-1)
+        return _host_hermite(d, lo, step, s_tab, ds_tab), dd
+
+    def screen(o, sg, cs, gm):
+        top, _ = screen_all(o, sg, cs, features(s_coarse @ gm.T, black), feats_grid, 1,
+                            chunk, None)
+        return coarse[top[:, 0]]
+
+    def refine(o, sg, cs, d0, gm):
+        return _refine_all(o, sg, cs, d0, None, np.inf, gm, table, steps, chunk, None)[0]
+
+    gm0 = gains[:, None] * cmat
+    light, gm, ident = fit_light(obs, sig, cens, known, phi, gm0, colour, screen, refine)
+    return light, gains * (gm.sum(axis=1) / gm0.sum(axis=1)), ident
 
 
 def _host_hermite(d, lo, h, s, ds):

@@ -45,9 +45,11 @@ The fit, in the order it runs:
    pixel). Standard errors are the linearised ones σ_d = (J^T J)^{-1/2} times the square root
    of the robust reduced χ² below (the noise scale of the typical pixel);
    a pixel is `ambiguous` where another local minimum at least 15 nm away (another fringe
-   order) has a χ² above its own by less than 4 · max(1, reduced χ²) (two standard
-   deviations). A robust reduced χ² (the median pixel's χ² over the median of χ²₂) above
-   `chi2_warn` raises a warning (in the result and by `warnings.warn`): the model does not
+   order) has a χ² above its own by less than 4 · max(1, robust reduced χ²) (two standard
+   deviations), or than 4 χ²_p (the pixel's own misfit), where its neighbours disagree by
+   two fringe-order separations, or, for an unknown camera, beyond the pads' span
+   (`fit.photo_flags`). A robust reduced χ² (the median pixel's χ² over the median of χ²₂)
+   above `chi2_warn` raises a warning (in the result and by `warnings.warn`): the model does not
    explain the photograph (wrong encoding, camera, light, angle or material). It is robust
    so that a few outlying pixels (an edge, a scratch) do not raise it.
 
@@ -90,7 +92,7 @@ from ..core.stack import Stack
 from ..optics.stack import stack_reflectance_traced
 from ..spectral.camera import Camera, camera_response, sensitivity_basis
 from .engine import covariance, levenberg_marquardt
-from .photo_flags import ambiguous as flag_pixels
+from .photo_flags import reasons as flag_reasons
 from .photo_light import ILLUMINATIONS, MIN_IDENTIFIABLE, basis, fit_light
 from .photo_screen import (DISTINCT_NM, bucket, chunks, closed_gains, features,
                            matrix_from_pixels, pad_to, reference_gains, residual, screen_all,
@@ -114,6 +116,12 @@ _GAIN_ROUNDS = 8  # alternations of the gains (an unknown camera's matrix) with 
 _BASIS_ROUNDS = 3  # an unknown camera's sensitivities alternating with screened thicknesses
 _PAD_WEIGHT = 3.0  # × the equal-weight factor: the pads are known, the rest is fitted
 _BASIS_SMOOTHING = 1e-2  # second-difference penalty of the sensitivities (`matrix_from_pixels`)
+
+
+_WHY = {"noise": "another fringe order within the noise",
+        "misfit": "another order within the pixel's own misfit",
+        "neighbours": "disagreeing with their neighbours",
+        "beyond_pads": "beyond the pads' thicknesses (an extrapolated camera)"}
 
 
 class PhotoResult(NamedTuple):
@@ -163,6 +171,11 @@ class PhotoResult(NamedTuple):
     light: np.ndarray | None = None
 
     @property
+    def chi2_text(self) -> str:
+        """The reduced χ² as every output says it (`chi2_text`)."""
+        return chi2_text(self.robust_chi2, self.reduced_chi2)
+
+    @property
     def pixels_per_second(self) -> float:
         return self.n_pixels / self.seconds if self.seconds > 0 else float("inf")
 
@@ -188,6 +201,19 @@ class PhotoResult(NamedTuple):
             "seconds": float(self.seconds), "pixels_per_second": float(self.pixels_per_second),
             "warnings": list(self.warnings),
         }
+
+
+def chi2_text(robust: float, mean: float) -> str:
+    """"reduced chi2 = R (robust; mean M)": the one way the warning, the console and the
+    figure's title say the reduced χ²."""
+    return f"reduced chi2 = {robust:.3g} (robust; mean {mean:.3g})"
+
+
+def _describe(photo: Photo, n_clip: int) -> str:
+    """`Photo.describe` with the fit's count of pixels with a clipped channel (its censoring,
+    a JPEG's black level included) in place of the reader's: one count everywhere."""
+    head = photo.describe().rsplit("; ", 1)[0]
+    return f"{head}; {n_clip} pixel{'' if n_clip == 1 else 's'} with a clipped channel"
 
 
 # ----------------------------------------------------------------------------- the model
@@ -494,7 +520,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
     k = _CANDIDATES
     rounds = _BASIS_ROUNDS if cam.kind == "unknown" else 0
-    bar = _progress(progress, (1 + k) * n * (1 + rounds) + 2 * n)
+    bar = _progress(progress, n, (1 + k) * n * (1 + rounds) + 2 * n)
 
     def orders(table, gm):
         """3. screen: the k best distinct local minima per pixel; 4. refine each; choose
@@ -583,7 +609,10 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     dof = max(2 * n - n_global, 1)
     robust_fit = float(np.median(chi) / _CHI2_2_MEDIAN)
     scale = np.sqrt(robust_fit)
-    amb = flag_pixels(chi, chi_alt, robust_fit, np.any(cens > 0, axis=-1), d, where, (h, w))
+    span = (float(known[pads].min()), float(known[pads].max())) if (
+        cam.kind == "unknown" and pads.any()) else None
+    why = flag_reasons(chi, chi_alt, robust_fit, d, where, (h, w), span)
+    amb = np.any(np.stack(list(why.values())), axis=0)
     if report_floor != model_floor:
         pred = _host_hermite(d, lo, step, *table[3:5]) @ gm.T
         sig_rep = sigma(report_floor).reshape(-1, 3)[where] / light[:, None]
@@ -593,18 +622,20 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     robust = float(np.median(chi) / _CHI2_2_MEDIAN)
     notes = []
     if robust > chi2_warn:
-        notes.append(f"reduced chi2 = {robust:.3g} (robust; mean {rchi2:.3g}) > {chi2_warn:g}: "
-                     f"the model does not explain "
+        notes.append(f"{chi2_text(robust, rchi2)} > {chi2_warn:g}: the model does not explain "
                      f"the photograph within its noise (check the encoding ({photo.encoding}), "
                      f"camera ({cam.name}), light ({cam.illuminant}), view angle and "
                      f"material); thicknesses may be wrong")
-    n_clip = int(np.sum(np.any(cens_img > 0, axis=-1) & valid))
+    clip_any = np.any(cens_img > 0, axis=-1)
+    n_clip = int(np.sum(clip_any))
     if n_clip:
-        notes.append(f"{n_clip} pixel(s) with a clipped channel, fitted with that channel "
-                     f"censored")
-    if np.sum(~valid):
-        notes.append(f"{int(np.sum(~valid))} pixel(s) not fitted (every channel clipped or "
-                     f"outside the mask)")
+        n_all = int(np.sum(np.all(cens_img > 0, axis=-1)))
+        notes.append(f"{n_clip} pixel(s) with a clipped channel: {int(np.sum(clip_any & valid))} "
+                     f"fitted with the clipped channel(s) censored, {n_all} with every channel "
+                     f"clipped, not fitted")
+    n_masked = int(np.sum(~valid & ~np.all(cens_img > 0, axis=-1)))
+    if n_masked:
+        notes.append(f"{n_masked} pixel(s) outside the mask, not fitted")
     if illumination == "smooth" and ident < MIN_IDENTIFIABLE:
         notes.append(f"the light field is not determined (identifiability {ident:.2g} < "
                      f"{MIN_IDENTIFIABLE:g}: the film's colours cannot tell a change of light "
@@ -614,6 +645,9 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     if np.mean(amb) > 0.2:
         notes.append(f"{100 * np.mean(amb):.0f} % of pixels are ambiguous between fringe "
                      f"orders: add reference regions, smoothness_nm, or narrow thickness_range")
+    if any(v.any() for k, v in why.items() if k != "noise"):  # what the fit cannot explain
+        notes.append(f"{int(amb.sum())} pixel(s) flagged ambiguous: " + ", ".join(
+            f"{int(v.sum())} {_WHY[k]}" for k, v in why.items() if v.any()))
     for note in notes[:1] if robust > chi2_warn else []:
         warnings.warn(note, stacklevel=2)
 
@@ -628,7 +662,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         exposure=float(gains[1]), white_balance=gains / gains[1], camera_matrix=cmat,
         camera_matrix_stderr=cmat_se, reduced_chi2=rchi2, robust_chi2=robust,
         warnings=tuple(notes),
-        encoding=photo.describe(), camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
+        encoding=_describe(photo, n_clip), camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
         seconds=time.perf_counter() - t0, illumination=illumination, light=full(light))
 
 
@@ -696,9 +730,29 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
     return [np.concatenate(v) for v in zip(*out)]
 
 
-def _progress(on, total):
+class _PixelBar:
+    """A tqdm bar over the image's n pixels fed the fit's passes (`work` pixel-passes in
+    all): it advances n / work per pixel-pass, so it counts pixels, not passes."""
+
+    def __init__(self, bar, n, work):
+        self.bar, self.scale, self.acc, self.done = bar, n / max(work, 1), 0.0, 0
+
+    def update(self, m):
+        self.acc += m * self.scale
+        step = min(int(self.acc), self.bar.total) - self.done
+        if step > 0:
+            self.bar.update(step)
+            self.done += step
+
+    def close(self):
+        if self.done < self.bar.total:
+            self.bar.update(self.bar.total - self.done)
+        self.bar.close()
+
+
+def _progress(on, n, work):
     if not on:
         return None
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, unit="px", desc="fit_photo", leave=False)
+    return _PixelBar(tqdm(total=n, unit="px", desc="fit_photo", leave=False), n, work)

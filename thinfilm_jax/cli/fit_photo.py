@@ -118,6 +118,25 @@ def _save_exr(path: Path, maps) -> None:
     atomic_write(path, write, suffix=".exr")
 
 
+def photo_title(name: str, res, eta_film: str, eta_base: str, smoothness) -> str:
+    """The thickness figure's title: the photograph, camera, light, materials, the neighbour
+    prior's τ where one was used, and the reduced χ² as the console says it.
+
+    Example:
+        >>> from types import SimpleNamespace as NS
+        >>> res = NS(thickness=[[0.0] * 4] * 3, camera="srgb", illuminant="D65",
+        ...          chi2_text="reduced chi2 = 1.1 (robust; mean 1.3)", exposure=0.5)
+        >>> print(photo_title("w.png", res, "SiO2", "Si", None))
+        w.png: 4×3, camera srgb, D65, η₂=SiO2 on η₃=Si
+        reduced chi2 = 1.1 (robust; mean 1.3), exposure 0.5; hatched: ambiguous fringe order
+    """
+    h, w = np.shape(res.thickness)
+    prior = f", τ={float(smoothness):g} nm" if smoothness else ""
+    return (f"{name}: {w}×{h}, camera {res.camera}, {res.illuminant}, "
+            f"η₂={eta_film} on η₃={eta_base}{prior}\n{res.chi2_text}, "
+            f"exposure {res.exposure:.3g}; hatched: ambiguous fringe order")
+
+
 def run_photo(args) -> int:
     """Fit, then write every output (module docstring); returns the exit status."""
     import warnings
@@ -154,10 +173,8 @@ def run_photo(args) -> int:
         atomic_write(out / f"{name}.npy", lambda tmp, a=a: np.save(tmp, a))
     _save_exr(out / "maps.exr", (d, se, amb.astype(float)))
     h, w = d.shape
-    title = (f"{image.name}: {w}×{h}, camera {res.camera}, {res.illuminant}, "
-             f"η₂={args.eta_film_index.text} on η₃={args.eta_base_index.text}, "
-             f"τ={args.smoothness or 'none'} nm\nreduced χ²={res.reduced_chi2:.3g}, "
-             f"exposure {res.exposure:.3g}; hatched: ambiguous fringe order")
+    title = photo_title(image.name, res, args.eta_film_index.text, args.eta_base_index.text,
+                        args.smoothness)
     from ._output import save_thickness_png
 
     save_thickness_png(out / "thickness.png", d, title, amb)
@@ -179,8 +196,7 @@ def run_photo(args) -> int:
           f"fit_photo.json: {int(ok.sum())} pixels, thickness {np.nanmin(d):.1f}–"
           f"{np.nanmax(d):.1f} nm, median stderr {np.nanmedian(se):.2f} nm, "
           f"{100 * amb.mean():.1f} % ambiguous; exposure {res.exposure:.4g}, white balance "
-          f"{np.round(res.white_balance, 4).tolist()}, reduced chi2 {res.robust_chi2:.3g} "
-          f"(robust; mean {res.reduced_chi2:.3g}); "
+          f"{np.round(res.white_balance, 4).tolist()}, {res.chi2_text}; "
           f"{res.pixels_per_second:.0f} pixels/s")
     for note in res.warnings:
         print(f"warning: {note}")

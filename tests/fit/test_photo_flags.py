@@ -2,8 +2,11 @@
 the pixel it is for and leaves a well-explained, isolated-order-free pixel alone."""
 
 import numpy as np
+import pytest
 
 from thinfilm_jax.fit import photo_flags as F
+
+pytestmark = pytest.mark.filterwarnings("ignore::colour.utilities.ColourRuntimeWarning")
 
 
 def _row(d, chi=None, alt=None):
@@ -37,3 +40,36 @@ def test_neighbours_and_pads():
     why = F.reasons(chi, alt, 1.0, d, where, (1, 3), pads_span=(0.0, 300.0))
     assert why["beyond_pads"].tolist() == [False, True, False]
     assert "beyond_pads" not in F.reasons(chi, alt, 1.0, d, where, (1, 3))
+
+
+def test_jpeg_standard_errors_are_said_uncalibrated(tmp_path):
+    """The standard errors assume independent noise per pixel: a JPEG file's result says they
+    are not calibrated (field, summary and a warning); the same image as a 16-bit PNG says
+    they are."""
+    import colour
+    import OpenImageIO as oiio
+
+    import thinfilm_jax as tf
+    from thinfilm_jax.fit.photo import fit_photo, render_photo
+
+    soap = tf.Film(0.0, tf.refractive_index("water"), 1.0)
+    d = np.broadcast_to(np.linspace(200.0, 700.0, 32), (24, 32))
+    enc = colour.cctf_encoding(np.clip(render_photo(soap, d, camera="srgb", exposure=3.0),
+                                       0, 1), function="sRGB")
+    paths = {}
+    for name, codes, fmt, extra in (
+            ("a.jpg", np.round(enc * 255).astype(np.uint8), oiio.UINT8, "jpeg:95"),
+            ("a.png", np.round(enc * 65535).astype(np.uint16), oiio.UINT16, None)):
+        spec = oiio.ImageSpec(32, 24, 3, fmt)
+        if extra:
+            spec.attribute("Compression", extra)
+        out = oiio.ImageOutput.create(str(tmp_path / name))
+        assert out.open(str(tmp_path / name), spec)
+        out.write_image(np.ascontiguousarray(codes))
+        out.close()
+        paths[name] = str(tmp_path / name)
+    kw = dict(camera="srgb", encoding="srgb", thickness_range=(0.0, 1000.0))
+    jpg, png = (fit_photo(paths[n], soap, **kw) for n in ("a.jpg", "a.png"))
+    assert not jpg.stderr_calibrated and not jpg.summary()["stderr_calibrated"]
+    assert any("raw and linear (lossless) input only" in w for w in jpg.warnings)
+    assert png.stderr_calibrated and not any("lossless" in w for w in png.warnings)

@@ -66,6 +66,9 @@ def add_arguments(p) -> None:
     g.add_argument("--reference", action="append", default=[], metavar="MASK:NM",
                    help="a region of known thickness: MASK.png:THICKNESS_NM (repeatable)")
     g.add_argument("--mask", metavar="MASK.png", help="pixels to fit (default: all)")
+    g.add_argument("--illumination", choices=["uniform", "smooth"], default="uniform",
+                   help="uniform light, or a smooth light field across the frame (vignetting, "
+                        "a lamp off to one side) fitted with the map")
     g.add_argument("--strict", action="store_true",
                    help=f"exit {MISFIT_EXIT} when the model does not explain the photograph")
 
@@ -162,7 +165,7 @@ def run_photo(args) -> int:
                         bit_depth=args.bit_depth, reference=reference or None,
                         theta_o=theta, alpha=alpha, thickness_range=tuple(args.thickness_range),
                         smoothness_nm=args.smoothness, mask=args.mask,
-                        progress=not args.quiet)
+                        progress=not args.quiet, illumination=args.illumination)
     print(f"read {res.encoding}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -186,7 +189,8 @@ def run_photo(args) -> int:
                             "eta_base": args.eta_base_index.text,
                             "theta_o_deg": args.theta_o or 0.0, "alpha": alpha,
                             "thickness_range": list(args.thickness_range),
-                            "smoothness_nm": args.smoothness},
+                            "smoothness_nm": args.smoothness,
+                            "illumination": args.illumination},
                **res.summary(),
                "outputs": ["thickness.npy", "stderr.npy", "ambiguous.npy", "maps.exr",
                            "thickness.png", "fit_photo.json"]}

@@ -146,6 +146,9 @@ class PhotoResult(NamedTuple):
         encoding: how the image was read (`core.image.Photo.describe`).
         camera, illuminant: the camera and light names of the model.
         n_pixels, seconds: pixels fitted and the wall time (compilation included).
+        stderr_calibrated: False for a lossy (JPEG) file: the standard errors assume
+            independent noise per pixel, calibrated for raw and linear (lossless) input
+            only; a JPEG's block-correlated compression error is not in them.
         illumination: "uniform" or "smooth"; light: the fitted light field (H, W), 1 at its
             peak over the fitted pixels (`fit.photo_light`; all ones under uniform light).
     """
@@ -169,6 +172,7 @@ class PhotoResult(NamedTuple):
     seconds: float
     illumination: str = "uniform"
     light: np.ndarray | None = None
+    stderr_calibrated: bool = True
 
     @property
     def chi2_text(self) -> str:
@@ -195,6 +199,7 @@ class PhotoResult(NamedTuple):
             "median_stderr_nm": float(np.median(self.stderr[ok])) if ok.any() else None,
             "chi2_p50_p99": [float(np.percentile(self.chi2[ok], q)) for q in (50, 99)]
             if ok.any() else None,
+            "stderr_calibrated": bool(self.stderr_calibrated),
             "illumination": self.illumination,
             "light_min_max": [float(np.nanmin(self.light)), float(np.nanmax(self.light))]
             if self.light is not None and ok.any() else None,
@@ -645,6 +650,10 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     if np.mean(amb) > 0.2:
         notes.append(f"{100 * np.mean(amb):.0f} % of pixels are ambiguous between fringe "
                      f"orders: add reference regions, smoothness_nm, or narrow thickness_range")
+    if jpeg:
+        notes.append("standard errors are calibrated for raw and linear (lossless) input only: "
+                     "a JPEG's compression error (8 × 8 DCT blocks, chroma subsampling) is "
+                     "correlated between pixels and not in them; read them as lower bounds")
     if any(v.any() for k, v in why.items() if k != "noise"):  # what the fit cannot explain
         notes.append(f"{int(amb.sum())} pixel(s) flagged ambiguous: " + ", ".join(
             f"{int(v.sum())} {_WHY[k]}" for k, v in why.items() if v.any()))
@@ -663,7 +672,8 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         camera_matrix_stderr=cmat_se, reduced_chi2=rchi2, robust_chi2=robust,
         warnings=tuple(notes),
         encoding=_describe(photo, n_clip), camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
-        seconds=time.perf_counter() - t0, illumination=illumination, light=full(light))
+        seconds=time.perf_counter() - t0, illumination=illumination, light=full(light),
+        stderr_calibrated=not jpeg)
 
 
 def _smooth_light(obs, sig, cens, known, phi, gains, cmat, table, coarse, chunk, steps):

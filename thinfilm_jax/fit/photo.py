@@ -92,8 +92,9 @@ from ..core.stack import Stack
 from ..optics.stack import stack_reflectance_traced
 from ..spectral.camera import Camera, camera_response, sensitivity_basis
 from .engine import covariance, levenberg_marquardt
+from .photo_flags import fit_notes
 from .photo_flags import reasons as flag_reasons
-from .photo_light import ILLUMINATIONS, MIN_IDENTIFIABLE, basis, fit_light
+from .photo_light import ILLUMINATIONS, basis, fit_light
 from .photo_screen import (DISTINCT_NM, bucket, chunks, closed_gains, features,
                            matrix_from_pixels, pad_to, reference_gains, residual, screen_all,
                            search_gains)
@@ -116,12 +117,6 @@ _GAIN_ROUNDS = 8  # alternations of the gains (an unknown camera's matrix) with 
 _BASIS_ROUNDS = 3  # an unknown camera's sensitivities alternating with screened thicknesses
 _PAD_WEIGHT = 3.0  # × the equal-weight factor: the pads are known, the rest is fitted
 _BASIS_SMOOTHING = 1e-2  # second-difference penalty of the sensitivities (`matrix_from_pixels`)
-
-
-_WHY = {"noise": "another fringe order within the noise",
-        "misfit": "another order within the pixel's own misfit",
-        "neighbours": "disagreeing with their neighbours",
-        "beyond_pads": "beyond the pads' thicknesses (an extrapolated camera)"}
 
 
 class PhotoResult(NamedTuple):
@@ -625,40 +620,15 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
                                           jnp.asarray(cens), black)) ** 2, axis=-1)
     rchi2 = float(np.sum(chi) / dof)
     robust = float(np.median(chi) / _CHI2_2_MEDIAN)
-    notes = []
-    if robust > chi2_warn:
-        notes.append(f"{chi2_text(robust, rchi2)} > {chi2_warn:g}: the model does not explain "
-                     f"the photograph within its noise (check the encoding ({photo.encoding}), "
-                     f"camera ({cam.name}), light ({cam.illuminant}), view angle and "
-                     f"material); thicknesses may be wrong")
-    clip_any = np.any(cens_img > 0, axis=-1)
-    n_clip = int(np.sum(clip_any))
-    if n_clip:
-        n_all = int(np.sum(np.all(cens_img > 0, axis=-1)))
-        notes.append(f"{n_clip} pixel(s) with a clipped channel: {int(np.sum(clip_any & valid))} "
-                     f"fitted with the clipped channel(s) censored, {n_all} with every channel "
-                     f"clipped, not fitted")
-    n_masked = int(np.sum(~valid & ~np.all(cens_img > 0, axis=-1)))
-    if n_masked:
-        notes.append(f"{n_masked} pixel(s) outside the mask, not fitted")
-    if illumination == "smooth" and ident < MIN_IDENTIFIABLE:
-        notes.append(f"the light field is not determined (identifiability {ident:.2g} < "
-                     f"{MIN_IDENTIFIABLE:g}: the film's colours cannot tell a change of light "
-                     f"from a change of thickness): add reference regions spread over the "
-                     f"frame, or use illumination='uniform' under even light")
-        warnings.warn(notes[-1], stacklevel=2)
-    if np.mean(amb) > 0.2:
-        notes.append(f"{100 * np.mean(amb):.0f} % of pixels are ambiguous between fringe "
-                     f"orders: add reference regions, smoothness_nm, or narrow thickness_range")
-    if jpeg:
-        notes.append("standard errors are calibrated for raw and linear (lossless) input only: "
-                     "a JPEG's compression error (8 × 8 DCT blocks, chroma subsampling) is "
-                     "correlated between pixels and not in them; read them as lower bounds")
-    if any(v.any() for k, v in why.items() if k != "noise"):  # what the fit cannot explain
-        notes.append(f"{int(amb.sum())} pixel(s) flagged ambiguous: " + ", ".join(
-            f"{int(v.sum())} {_WHY[k]}" for k, v in why.items() if v.any()))
-    for note in notes[:1] if robust > chi2_warn else []:
+    misfit = (f"{chi2_text(robust, rchi2)} > {chi2_warn:g}: the model does not explain the "
+              f"photograph within its noise (check the encoding ({photo.encoding}), camera "
+              f"({cam.name}), light ({cam.illuminant}), view angle and material); "
+              f"thicknesses may be wrong") if robust > chi2_warn else None
+    notes, loud = fit_notes(misfit, cens_img, valid, amb, why, jpeg,
+                            ident if illumination == "smooth" else None)
+    for note in loud:
         warnings.warn(note, stacklevel=2)
+    described = _describe(photo, int(np.sum(np.any(cens_img > 0, axis=-1))))
 
     def full(v, fill=np.nan, dtype=float):
         out = np.full(h * w, fill, dtype)
@@ -671,7 +641,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         exposure=float(gains[1]), white_balance=gains / gains[1], camera_matrix=cmat,
         camera_matrix_stderr=cmat_se, reduced_chi2=rchi2, robust_chi2=robust,
         warnings=tuple(notes),
-        encoding=_describe(photo, n_clip), camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
+        encoding=described, camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
         seconds=time.perf_counter() - t0, illumination=illumination, light=full(light),
         stderr_calibrated=not jpeg)
 

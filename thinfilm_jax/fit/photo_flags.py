@@ -71,3 +71,49 @@ def ambiguous(chi, chi_alt, robust_fit, d, where, shape, pads_span=None):
     """(n,) bool: any criterion of `reasons`."""
     return np.any(np.stack(list(reasons(chi, chi_alt, robust_fit, d, where, shape,
                                         pads_span).values())), axis=0)
+
+
+_WHY = {"noise": "another fringe order within the noise",
+        "misfit": "another order within the pixel's own misfit",
+        "neighbours": "disagreeing with their neighbours",
+        "beyond_pads": "beyond the pads' thicknesses (an extrapolated camera)"}
+
+
+def fit_notes(misfit, cens_img, valid, amb, why, jpeg, light_ident=None):
+    """(notes, the notes to raise as Python warnings too) of a fit: the misfit (a sentence
+    or None), clipped and masked pixels (one count of pixels with a clipped channel, the
+    count the photograph's description gives), an undetermined light field
+    (`fit.photo_light.identifiability` below `MIN_IDENTIFIABLE`; None: uniform light), many
+    ambiguous pixels, a JPEG's uncalibrated standard errors, and why pixels were flagged
+    beyond the noise."""
+    from .photo_light import MIN_IDENTIFIABLE
+
+    notes, loud = [], []
+    if misfit:
+        notes.append(misfit)
+        loud.append(misfit)
+    clip_any, clip_all = np.any(cens_img > 0, axis=-1), np.all(cens_img > 0, axis=-1)
+    if clip_any.any():
+        notes.append(f"{int(clip_any.sum())} pixel(s) with a clipped channel: "
+                     f"{int(np.sum(clip_any & valid))} fitted with the clipped channel(s) "
+                     f"censored, {int(clip_all.sum())} with every channel clipped, not fitted")
+    n_masked = int(np.sum(~valid & ~clip_all))
+    if n_masked:
+        notes.append(f"{n_masked} pixel(s) outside the mask, not fitted")
+    if light_ident is not None and light_ident < MIN_IDENTIFIABLE:
+        notes.append(f"the light field is not determined (identifiability {light_ident:.2g} < "
+                     f"{MIN_IDENTIFIABLE:g}: the film's colours cannot tell a change of light "
+                     f"from a change of thickness): add reference regions spread over the "
+                     f"frame, or use illumination='uniform' under even light")
+        loud.append(notes[-1])
+    if np.mean(amb) > 0.2:
+        notes.append(f"{100 * np.mean(amb):.0f} % of pixels are ambiguous between fringe "
+                     f"orders: add reference regions, smoothness_nm, or narrow thickness_range")
+    if jpeg:
+        notes.append("standard errors are calibrated for raw and linear (lossless) input only: "
+                     "a JPEG's compression error (8 × 8 DCT blocks, chroma subsampling) is "
+                     "correlated between pixels and not in them; read them as lower bounds")
+    if any(v.any() for k, v in why.items() if k != "noise"):  # what the fit cannot explain
+        notes.append(f"{int(amb.sum())} pixel(s) flagged ambiguous: " + ", ".join(
+            f"{int(v.sum())} {_WHY[k]}" for k, v in why.items() if v.any()))
+    return notes, loud

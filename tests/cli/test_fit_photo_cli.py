@@ -115,3 +115,60 @@ def test_cli_photo_misfit_warns_and_strict_exits(wafer, tmp_path, capsys):
     assert main([*argv, "--out", str(tmp_path / "a")]) == 0
     assert "warning: reduced chi2" in capsys.readouterr().out
     assert main([*argv, "--out", str(tmp_path / "b"), "--strict"]) == 3
+
+
+def test_cli_photo_says_chi2_and_clipped_count_one_way(wafer, tmp_path, capsys, monkeypatch):
+    """The figure's title leads with the reduced χ² exactly as the console says it (robust,
+    then mean) and has no "τ=none" without a prior; the first line's clipped-pixel count is
+    the warning's (7 pixels with a channel at full scale here)."""
+    from thinfilm_jax.cli import _output
+
+    titles = []
+    real = _output.save_thickness_png
+    monkeypatch.setattr(_output, "save_thickness_png",
+                        lambda path, d, title, amb: (titles.append(title), real(path, d, title,
+                                                                                 amb))[1])
+    tmp, d = wafer
+    buf = oiio.ImageBuf(str(tmp / "wafer.tif"))
+    codes = np.asarray(buf.get_pixels(oiio.UINT16)).copy()
+    codes[10, :7, 0] = 65535  # seven pixels with the red channel clipped
+    _write(tmp_path / "clipped.tif", codes, oiio.UINT16)
+    rc = main(["fit-map", str(tmp_path / "clipped.tif"), *BASE, "--reference",
+               f"{tmp / 'bare.png'}:0", "--out", str(tmp_path / "out")])
+    assert rc == 0
+    text = capsys.readouterr().out
+    first = text.splitlines()[0]
+    assert first.endswith("; 7 pixels with a clipped channel"), first
+    assert "warning: 7 pixel(s) with a clipped channel" in text
+    chi2 = re.search(r"reduced chi2 = \S+ \(robust; mean \S+\)", text).group(0)
+    assert len(titles) == 1 and chi2 in titles[0]
+    assert "none" not in titles[0] and "τ" not in titles[0]
+
+
+def test_progress_bar_counts_pixels(monkeypatch):
+    """The progress bar's total and its final count are the image's pixels (the fit makes
+    several passes over them: it counted 7 per pixel)."""
+    import tqdm.auto
+
+    from thinfilm_jax.fit.photo import fit_photo
+
+    seen = {}
+
+    class Bar:
+        def __init__(self, total, **kw):
+            self.total, self.n = total, 0
+            seen["bar"] = self
+
+        def update(self, m):
+            self.n += m
+
+        def close(self):
+            seen["closed"] = True
+
+    monkeypatch.setattr(tqdm.auto, "tqdm", Bar)
+    y = np.arange(H)[:, None] / (H - 1)
+    d = np.broadcast_to(40.0 + 800.0 * y, (H, W))
+    res = fit_photo(render_photo(OXIDE, d, camera="srgb"), OXIDE, camera="srgb",
+                    encoding="linear", thickness_range=(0, 1000), progress=True)
+    assert seen["bar"].total == res.n_pixels == H * W
+    assert seen["bar"].n == H * W and seen["closed"]

@@ -72,6 +72,9 @@ def add_arguments(p) -> None:
     g.add_argument("--reference", action="append", default=[], metavar="MASK:NM",
                    help="a region of known thickness: MASK.png:THICKNESS_NM (repeatable)")
     g.add_argument("--mask", metavar="MASK.png", help="pixels to fit (default: all)")
+    g.add_argument("--illumination", choices=["uniform", "smooth"], default="uniform",
+                   help="uniform light, or a smooth light field across the frame (vignetting, "
+                        "a lamp off to one side) fitted with the map")
     g.add_argument("--strict", action="store_true",
                    help=f"exit {MISFIT_EXIT} when the model does not explain the photograph")
 
@@ -124,6 +127,25 @@ def _save_exr(path: Path, maps) -> None:
     atomic_write(path, write, suffix=".exr")
 
 
+def photo_title(name: str, res, eta_film: str, eta_base: str, smoothness) -> str:
+    """The thickness figure's title: the photograph, camera, light, materials, the neighbour
+    prior's τ where one was used, and the reduced χ² as the console says it.
+
+    Example:
+        >>> from types import SimpleNamespace as NS
+        >>> res = NS(thickness=[[0.0] * 4] * 3, camera="srgb", illuminant="D65",
+        ...          chi2_text="reduced chi2 = 1.1 (robust; mean 1.3)", exposure=0.5)
+        >>> print(photo_title("w.png", res, "SiO2", "Si", None))
+        w.png: 4×3, camera srgb, D65, η₂=SiO2 on η₃=Si
+        reduced chi2 = 1.1 (robust; mean 1.3), exposure 0.5; hatched: ambiguous fringe order
+    """
+    h, w = np.shape(res.thickness)
+    prior = f", τ={float(smoothness):g} nm" if smoothness else ""
+    return (f"{name}: {w}×{h}, camera {res.camera}, {res.illuminant}, "
+            f"η₂={eta_film} on η₃={eta_base}{prior}\n{res.chi2_text}, "
+            f"exposure {res.exposure:.3g}; hatched: ambiguous fringe order")
+
+
 def run_photo(args) -> int:
     """Fit, then write every output (module docstring); returns the exit status."""
     import warnings
@@ -149,7 +171,7 @@ def run_photo(args) -> int:
                         bit_depth=args.bit_depth, reference=reference or None,
                         theta_o=theta, alpha=alpha, thickness_range=tuple(args.thickness_range),
                         smoothness_nm=args.smoothness, mask=args.mask,
-                        progress=not args.quiet)
+                        progress=not args.quiet, illumination=args.illumination)
     print(f"read {res.encoding}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -160,10 +182,8 @@ def run_photo(args) -> int:
         atomic_write(out / f"{name}.npy", lambda tmp, a=a: np.save(tmp, a))
     _save_exr(out / "maps.exr", (d, se, amb.astype(float)))
     h, w = d.shape
-    title = (f"{image.name}: {w}×{h}, camera {res.camera}, {res.illuminant}, "
-             f"η₂={args.eta_film_index.text} on η₃={args.eta_base_index.text}, "
-             f"τ={args.smoothness or 'none'} nm\nreduced χ²={res.reduced_chi2:.3g}, "
-             f"exposure {res.exposure:.3g}; hatched: ambiguous fringe order")
+    title = photo_title(image.name, res, args.eta_film_index.text, args.eta_base_index.text,
+                        args.smoothness)
     from ._output import save_thickness_png
 
     save_thickness_png(out / "thickness.png", d, title, amb)
@@ -182,7 +202,8 @@ def run_photo(args) -> int:
                             "thickness_range": list(args.thickness_range),
                             "smoothness_nm": args.smoothness, "gltf": args.gltf,
                             "gltf_bits": args.gltf_bits,
-                            "gltf_wavelength": args.gltf_wavelength},
+                            "gltf_wavelength": args.gltf_wavelength,
+                            "illumination": args.illumination},
                **res.summary(),
                "outputs": ["thickness.npy", "stderr.npy", "ambiguous.npy", "maps.exr",
                            "thickness.png", "fit_photo.json"]}
@@ -194,8 +215,7 @@ def run_photo(args) -> int:
           f"fit_photo.json: {int(ok.sum())} pixels, thickness {np.nanmin(d):.1f}–"
           f"{np.nanmax(d):.1f} nm, median stderr {np.nanmedian(se):.2f} nm, "
           f"{100 * amb.mean():.1f} % ambiguous; exposure {res.exposure:.4g}, white balance "
-          f"{np.round(res.white_balance, 4).tolist()}, reduced chi2 {res.robust_chi2:.3g} "
-          f"(robust; mean {res.reduced_chi2:.3g}); "
+          f"{np.round(res.white_balance, 4).tolist()}, {res.chi2_text}; "
           f"{res.pixels_per_second:.0f} pixels/s")
     if gltf is not None:
         from ._output import gltf_line

@@ -27,6 +27,9 @@ The fit, in the order it runs:
    regions of distinct colour). Without: alternating minimisation on a subsample of pixels,
    the nearest-colour screen given the gains and the closed-form gains given the
    thicknesses, from a ladder of starting exposures; the lowest total χ² wins.
+   With ``illumination="smooth"`` a light field L(x) (the exponential of a degree-3
+   polynomial in the pixel coordinates, `fit.photo_light`) is then fitted on a subsample,
+   alternating with the pixels' thicknesses, and the photograph divided by it.
 3. **Screen.** χ²_p(d_g) for every pixel on a coarse grid (`screen_step_nm`, every basin of
    χ²(d) holds a grid point: fringes are ≳ 100 nm wide) as one matrix product, and the k = 4
    lowest local minima of each pixel. Channels clipped at black or full scale are censored:
@@ -42,9 +45,11 @@ The fit, in the order it runs:
    pixel). Standard errors are the linearised ones σ_d = (J^T J)^{-1/2} times the square root
    of the robust reduced χ² below (the noise scale of the typical pixel);
    a pixel is `ambiguous` where another local minimum at least 15 nm away (another fringe
-   order) has a χ² above its own by less than 4 · max(1, reduced χ²) (two standard
-   deviations). A robust reduced χ² (the median pixel's χ² over the median of χ²₂) above
-   `chi2_warn` raises a warning (in the result and by `warnings.warn`): the model does not
+   order) has a χ² above its own by less than 4 · max(1, robust reduced χ²) (two standard
+   deviations), or than 4 χ²_p (the pixel's own misfit), where its neighbours disagree by
+   two fringe-order separations, or, for an unknown camera, beyond the pads' span
+   (`fit.photo_flags`). A robust reduced χ² (the median pixel's χ² over the median of χ²₂)
+   above `chi2_warn` raises a warning (in the result and by `warnings.warn`): the model does not
    explain the photograph (wrong encoding, camera, light, angle or material). It is robust
    so that a few outlying pixels (an edge, a scratch) do not raise it.
 
@@ -87,6 +92,9 @@ from ..core.stack import Stack
 from ..optics.stack import stack_reflectance_traced
 from ..spectral.camera import Camera, camera_response, sensitivity_basis
 from .engine import covariance, levenberg_marquardt
+from .photo_flags import fit_notes
+from .photo_flags import reasons as flag_reasons
+from .photo_light import ILLUMINATIONS, basis, fit_light
 from .photo_screen import (DISTINCT_NM, bucket, chunks, closed_gains, features,
                            matrix_from_pixels, pad_to, reference_gains, residual, screen_all,
                            search_gains)
@@ -133,6 +141,11 @@ class PhotoResult(NamedTuple):
         encoding: how the image was read (`core.image.Photo.describe`).
         camera, illuminant: the camera and light names of the model.
         n_pixels, seconds: pixels fitted and the wall time (compilation included).
+        stderr_calibrated: False for a lossy (JPEG) file: the standard errors assume
+            independent noise per pixel, calibrated for raw and linear (lossless) input
+            only; a JPEG's block-correlated compression error is not in them.
+        illumination: "uniform" or "smooth"; light: the fitted light field (H, W), 1 at its
+            peak over the fitted pixels (`fit.photo_light`; all ones under uniform light).
     """
 
     thickness: np.ndarray
@@ -152,6 +165,14 @@ class PhotoResult(NamedTuple):
     illuminant: str
     n_pixels: int
     seconds: float
+    illumination: str = "uniform"
+    light: np.ndarray | None = None
+    stderr_calibrated: bool = True
+
+    @property
+    def chi2_text(self) -> str:
+        """The reduced χ² as every output says it (`chi2_text`)."""
+        return chi2_text(self.robust_chi2, self.reduced_chi2)
 
     @property
     def pixels_per_second(self) -> float:
@@ -173,9 +194,26 @@ class PhotoResult(NamedTuple):
             "median_stderr_nm": float(np.median(self.stderr[ok])) if ok.any() else None,
             "chi2_p50_p99": [float(np.percentile(self.chi2[ok], q)) for q in (50, 99)]
             if ok.any() else None,
+            "stderr_calibrated": bool(self.stderr_calibrated),
+            "illumination": self.illumination,
+            "light_min_max": [float(np.nanmin(self.light)), float(np.nanmax(self.light))]
+            if self.light is not None and ok.any() else None,
             "seconds": float(self.seconds), "pixels_per_second": float(self.pixels_per_second),
             "warnings": list(self.warnings),
         }
+
+
+def chi2_text(robust: float, mean: float) -> str:
+    """"reduced chi2 = R (robust; mean M)": the one way the warning, the console and the
+    figure's title say the reduced χ²."""
+    return f"reduced chi2 = {robust:.3g} (robust; mean {mean:.3g})"
+
+
+def _describe(photo: Photo, n_clip: int) -> str:
+    """`Photo.describe` with the fit's count of pixels with a clipped channel (its censoring,
+    a JPEG's black level included) in place of the reader's: one count everywhere."""
+    head = photo.describe().rsplit("; ", 1)[0]
+    return f"{head}; {n_clip} pixel{'' if n_clip == 1 else 's'} with a clipped channel"
 
 
 # ----------------------------------------------------------------------------- the model
@@ -358,8 +396,8 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
               layer: int = 0, smoothness_nm=None, mask=None, bit_depth=None,
               model_floor: float | None = None, grid_step_nm: float = 1.0,
               screen_step_nm: float = 4.0, steps: int = 6,
-              chi2_warn: float = 4.0, chunk: int = 4096, progress: bool = False
-              ) -> PhotoResult:
+              chi2_warn: float = 4.0, chunk: int = 4096, progress: bool = False,
+              illumination: str = "uniform") -> PhotoResult:
     """Fit the thickness map of a photograph of a film (module docstring; SPEC §13).
 
     Args:
@@ -390,6 +428,9 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         steps: Levenberg–Marquardt steps; chi2_warn: the robust reduced χ² above which the
             fit warns;
         chunk: pixels per batch; progress: a tqdm progress bar over pixels.
+        illumination: "uniform" (one exposure for the frame) or "smooth" (a smooth positive
+            light field across the frame, the exponential of a degree-2 polynomial in the
+            pixel coordinates, fitted jointly with the map: `fit.photo_light`).
 
     Returns:
         `PhotoResult`.
@@ -408,6 +449,8 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     report_floor = model_floor if report_floor is None else report_floor
     lo, hi = _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor,
                          grid_step_nm, chi2_warn)
+    if illumination not in ILLUMINATIONS:
+        raise ValueError(f"illumination must be one of {ILLUMINATIONS}, got {illumination!r}")
     cam = camera_response(camera, illuminant)
     if not isinstance(reference, (list, tuple, type(None))):
         raise ValueError("reference must be a list of (mask, thickness_nm) pairs")
@@ -469,10 +512,15 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         cmat, cmat_se = np.eye(3), np.zeros((3, 3))
         gains = search_gains(obs, sig, cens, table[3][coarse], jnp.asarray(grid[coarse]),
                               chunk, black)
+    light = np.ones(n)
+    if illumination == "smooth":  # the field, then the photograph divided by it
+        light, gains, ident = _smooth_light(obs, sig, cens, known, basis(where, h, w),
+                                            gains, cmat, table, grid[coarse], chunk, steps)
+        obs, sig = obs / light[:, None], sig / light[:, None]
     tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
     k = _CANDIDATES
     rounds = _BASIS_ROUNDS if cam.kind == "unknown" else 0
-    bar = _progress(progress, (1 + k) * n * (1 + rounds) + 2 * n)
+    bar = _progress(progress, n, (1 + k) * n * (1 + rounds) + 2 * n)
 
     def orders(table, gm):
         """3. screen: the k best distinct local minima per pixel; 4. refine each; choose
@@ -561,33 +609,26 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     dof = max(2 * n - n_global, 1)
     robust_fit = float(np.median(chi) / _CHI2_2_MEDIAN)
     scale = np.sqrt(robust_fit)
-    amb = np.isfinite(chi_alt) & (chi_alt - chi < 4.0 * max(robust_fit, 1.0))
+    span = (float(known[pads].min()), float(known[pads].max())) if (
+        cam.kind == "unknown" and pads.any()) else None
+    why = flag_reasons(chi, chi_alt, robust_fit, d, where, (h, w), span)
+    amb = np.any(np.stack(list(why.values())), axis=0)
     if report_floor != model_floor:
         pred = _host_hermite(d, lo, step, *table[3:5]) @ gm.T
-        sig_rep = sigma(report_floor).reshape(-1, 3)[where]
+        sig_rep = sigma(report_floor).reshape(-1, 3)[where] / light[:, None]
         chi = np.sum(np.asarray(residual(jnp.asarray(pred), jnp.asarray(obs), jnp.asarray(sig_rep),
                                           jnp.asarray(cens), black)) ** 2, axis=-1)
     rchi2 = float(np.sum(chi) / dof)
     robust = float(np.median(chi) / _CHI2_2_MEDIAN)
-    notes = []
-    if robust > chi2_warn:
-        notes.append(f"reduced chi2 = {robust:.3g} (robust; mean {rchi2:.3g}) > {chi2_warn:g}: "
-                     f"the model does not explain "
-                     f"the photograph within its noise (check the encoding ({photo.encoding}), "
-                     f"camera ({cam.name}), light ({cam.illuminant}), view angle and "
-                     f"material); thicknesses may be wrong")
-    n_clip = int(np.sum(np.any(cens_img > 0, axis=-1) & valid))
-    if n_clip:
-        notes.append(f"{n_clip} pixel(s) with a clipped channel, fitted with that channel "
-                     f"censored")
-    if np.sum(~valid):
-        notes.append(f"{int(np.sum(~valid))} pixel(s) not fitted (every channel clipped or "
-                     f"outside the mask)")
-    if np.mean(amb) > 0.2:
-        notes.append(f"{100 * np.mean(amb):.0f} % of pixels are ambiguous between fringe "
-                     f"orders: add reference regions, smoothness_nm, or narrow thickness_range")
-    for note in notes[:1] if robust > chi2_warn else []:
+    misfit = (f"{chi2_text(robust, rchi2)} > {chi2_warn:g}: the model does not explain the "
+              f"photograph within its noise (check the encoding ({photo.encoding}), camera "
+              f"({cam.name}), light ({cam.illuminant}), view angle and material); "
+              f"thicknesses may be wrong") if robust > chi2_warn else None
+    notes, loud = fit_notes(misfit, cens_img, valid, amb, why, jpeg,
+                            ident if illumination == "smooth" else None)
+    for note in loud:
         warnings.warn(note, stacklevel=2)
+    described = _describe(photo, int(np.sum(np.any(cens_img > 0, axis=-1))))
 
     def full(v, fill=np.nan, dtype=float):
         out = np.full(h * w, fill, dtype)
@@ -600,8 +641,33 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         exposure=float(gains[1]), white_balance=gains / gains[1], camera_matrix=cmat,
         camera_matrix_stderr=cmat_se, reduced_chi2=rchi2, robust_chi2=robust,
         warnings=tuple(notes),
-        encoding=photo.describe(), camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
-        seconds=time.perf_counter() - t0)
+        encoding=described, camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
+        seconds=time.perf_counter() - t0, illumination=illumination, light=full(light),
+        stderr_calibrated=not jpeg)
+
+
+def _smooth_light(obs, sig, cens, known, phi, gains, cmat, table, coarse, chunk, steps):
+    """`fit.photo_light.fit_light` on the table: (L (n,), gains (3,), identifiability)."""
+    lo, _, step, s_tab, ds_tab, black = table
+    feats_grid = jnp.asarray(coarse)
+    s_coarse = s_tab[np.rint((coarse - lo) / step).astype(int)]
+
+    def colour(d):
+        dd = np.stack([np.interp(d, lo + step * np.arange(len(s_tab)), ds_tab[:, c])
+                       for c in range(ds_tab.shape[1])], axis=-1)
+        return _host_hermite(d, lo, step, s_tab, ds_tab), dd
+
+    def screen(o, sg, cs, gm):
+        top, _ = screen_all(o, sg, cs, features(s_coarse @ gm.T, black), feats_grid, 1,
+                            chunk, None)
+        return coarse[top[:, 0]]
+
+    def refine(o, sg, cs, d0, gm):
+        return _refine_all(o, sg, cs, d0, None, np.inf, gm, table, steps, chunk, None)[0]
+
+    gm0 = gains[:, None] * cmat
+    light, gm, ident = fit_light(obs, sig, cens, known, phi, gm0, colour, screen, refine)
+    return light, gains * (gm.sum(axis=1) / gm0.sum(axis=1)), ident
 
 
 def _host_hermite(d, lo, h, s, ds):
@@ -644,9 +710,29 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
     return [np.concatenate(v) for v in zip(*out)]
 
 
-def _progress(on, total):
+class _PixelBar:
+    """A tqdm bar over the image's n pixels fed the fit's passes (`work` pixel-passes in
+    all): it advances n / work per pixel-pass, so it counts pixels, not passes."""
+
+    def __init__(self, bar, n, work):
+        self.bar, self.scale, self.acc, self.done = bar, n / max(work, 1), 0.0, 0
+
+    def update(self, m):
+        self.acc += m * self.scale
+        step = min(int(self.acc), self.bar.total) - self.done
+        if step > 0:
+            self.bar.update(step)
+            self.done += step
+
+    def close(self):
+        if self.done < self.bar.total:
+            self.bar.update(self.bar.total - self.done)
+        self.bar.close()
+
+
+def _progress(on, n, work):
     if not on:
         return None
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, unit="px", desc="fit_photo", leave=False)
+    return _PixelBar(tqdm(total=n, unit="px", desc="fit_photo", leave=False), n, work)

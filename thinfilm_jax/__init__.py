@@ -109,5 +109,8 @@ from .core.sharding import shard_batch as shard_batch
 from .spectral.spectra import OBSERVERS as OBSERVERS
 from .spectral.spectra import get_observer as get_observer
 from .spectral.spectra import sensitivity_ft as sensitivity_ft
+# microscope objectives and 2D materials (SPEC §14): optics/objective.py, optics/materials.py
+from .optics.objective import objective_reflectance as objective_reflectance
+from .optics.materials import MONOLAYER_NM as MONOLAYER_NM
 
 __version__ = "0.2.0"

@@ -54,7 +54,7 @@ with the NA; at NA = 0 it is ((n − 1)/(n + 1))² = 0.04):
     >>> from thinfilm_jax.core.stack import Stack
     >>> glass = Stack([0.0], (1.5,), 1.5)
     >>> [round(float(objective_reflectance(glass, 550.0, na)), 6) for na in (0.0, 0.9)]
-    [0.04, 0.047339]
+    [0.04, 0.053761]
 """
 
 from __future__ import annotations

@@ -87,7 +87,12 @@ def contrast_curves(cam) -> dict:
 
 def layer_map() -> np.ndarray:
     """The synthetic flake's true layer counts (48 × 64): bare oxide around three terraces of
-    1, 2 and 3 layers, with a slanted edge."""
+    1, 2 and 3 layers, with a slanted edge.
+
+    >>> n = layer_map()
+    >>> n.shape, [int(k) for k in np.unique(n)], int((n == 3).sum())
+    ((48, 64), [0, 1, 2, 3], 568)
+    """
     h, w = SHAPE
     y, x = np.mgrid[0:h, 0:w]
     n = np.zeros(SHAPE, int)

@@ -52,7 +52,7 @@ def _tmm_stack_average(n_list_of_lam, d_list, lam, na, pol, n_theta=400):
 def test_equals_400_node_tmm_quadrature_graphene_on_oxide(na):
     """Monolayer graphene (Weber 2010) on 285 nm SiO₂ (Malitson) on Si (Schinke):
     the library's rule against 400 nodes of tmm in θ, unpolarised at 420 and 680 nm, s and p
-    at 550 nm. Measured: ≤ 2e-15."""
+    at 550 nm. Measured: ≤ 4.7e-15."""
     d_ox = 285.0
     stack = Stack([GRAPHENE_NM, d_ox], (GRAPHENE, SIO2), SI)
 
@@ -69,7 +69,8 @@ def test_equals_400_node_tmm_quadrature_graphene_on_oxide(na):
 def test_equals_400_node_tmm_quadrature_immersion_multilayer():
     """Under oil (η₁ = 1.515, NA 1.4) a 3-layer stack with a metal layer and a 1.46 layer
     less dense than the oil (its branch point near the cone's edge: `branch_rho`; 32 nodes
-    alone are off by 4e-5). Measured: ≤ 1e-10."""
+    alone are off by 4e-5). Measured: 9.1e-10 at 420 nm (the rule's error: tmm at 400 nodes in
+    θ agrees with 1000 nodes of this rule to 3e-14); the rule's target is 1e-8."""
     eta = (2.0, 0.2 + 3.0j, 1.46)
     d = [120.0, 15.0, 400.0]
     base = 3.9 + 0.02j
@@ -79,7 +80,7 @@ def test_equals_400_node_tmm_quadrature_immersion_multilayer():
     for i, lam in enumerate(lams):
         ref = _tmm_stack_average(lambda _: [1.515, *eta, base], [np.inf, *d, np.inf], lam,
                                  1.4, "unpolarised")
-        assert abs(got[i] - ref) < 1e-9
+        assert abs(got[i] - ref) < 1e-8
 
 
 def test_na_zero_is_normal_incidence_and_small_na_converges():

@@ -42,7 +42,7 @@ Measured against a 4000-node rule (graphene on SiO₂ on Si, λ = 400/550/800 nm
 first two terms alone (the third only adds nodes): ≤ 4e-14 up to 1 µm of oxide, ≤ 1e-8 up
 to 10 µm (Φ = 109 rad, 251 nodes) for NA ≤ 0.95, 3e-7 at NA = η₁ with 10 µm. 32 nodes alone
 give 3e-10 at 1 µm and NA 0.95, 1.4e-6 at 2 µm. Under oil (η₁ = 1.515, NA 1.4) above a
-1.46 layer, 32 nodes are off by 4e-5; the third term brings it below 1e-9 (tested).
+1.46 layer, 32 nodes are off by 4e-5; the third term brings it to 9e-10 (tested).
 
 **Limits.** NA = 0 gives $h = 0$, every $c_i = 1$ and $\bar R = R(\theta = 0)$ exactly; the
 formula has no singularity there ($h = u_{\max}/(1 + c_{\min})$, no division by NA), so

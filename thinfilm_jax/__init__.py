@@ -118,5 +118,8 @@ from .optics.oscillators import lorentz as lorentz
 from .optics.oscillators import gaussian as gaussian
 from .optics.oscillators import tauc_lorentz as tauc_lorentz
 from .optics.effective_medium import EffectiveMedium as EffectiveMedium
+# microscope objectives and 2D materials (SPEC §14): optics/objective.py, optics/materials.py
+from .optics.objective import objective_reflectance as objective_reflectance
+from .optics.materials import MONOLAYER_NM as MONOLAYER_NM
 
 __version__ = "0.2.0"

@@ -5,7 +5,8 @@
 * a number, real or complex (n + iκ, κ ≥ 0): `ConstantIndex`;
 * an index model: returned as is;
 * a bundled material name (`MATERIALS`, case-insensitive): "SiO2", "Si", "Si3N4", "TiO2",
-  "Al2O3", "MgF2", "water", "Al", "Ag", "Au", "Cu", "Cr";
+  "Al2O3", "MgF2", "water", "Al", "Ag", "Au", "Cu", "Cr", and the 2D materials "graphene"
+  and "MoS2" (one layer's index; `MONOLAYER_NM` gives one layer's thickness);
 * a path to a refractiveindex.info YAML file (``.yml``/``.yaml``: `DATA` entries of type
   ``tabulated nk``, ``tabulated n``, ``tabulated k`` and ``formula 1``–``formula 9``,
   wavelengths in µm, ``wavelength_range`` (or the older ``range``) in µm); n and κ from two
@@ -112,7 +113,28 @@ MATERIALS: dict[str, Material] = {
     "Au": Material(_RAKIC, (247.97, 1998.0), "Au-Rakic-1998.csv", None, _RAKIC_NOTE),
     "Cu": Material(_RAKIC, (206.64, 1986.6), "Cu-Rakic-1998.csv", None, _RAKIC_NOTE),
     "Cr": Material(_RAKIC, (247.97, 1992.2), "Cr-Rakic-1998.csv", None, _RAKIC_NOTE),
+    # 2D materials (SPEC §14): one layer's index, for a film of N × the monolayer thickness
+    # (`MONOLAYER_NM`) on thermal oxide
+    "graphene": Material(
+        "J. W. Weber, V. E. Calado and M. C. M. van de Sanden, \"Optical constants of "
+        "graphene measured by spectroscopic ellipsometry\", Appl. Phys. Lett. 97, 091904 "
+        "(2010)",
+        (210.873, 999.007), "graphene-Weber-2010.csv", None,
+        "mechanically exfoliated monolayer on 98 nm SiO2 on Si, in-plane index, fitted as a "
+        "0.34 nm layer"),
+    "MoS2": Material(
+        "G. A. Ermolaev et al., \"Broadband optical properties of monolayer and bulk MoS2\", "
+        "npj 2D Mater. Appl. 4, 21 (2020)",
+        (290.0, 2000.0), "MoS2-Ermolaev-2020.csv", None,
+        "CVD monolayer on SiO2/Si, in-plane index (Tauc–Lorentz oscillators fitted to "
+        "spectroscopic ellipsometry)"),
 }
+
+#: name → the thickness (nm) of one layer of a bundled 2D material: graphene 0.335 nm (the
+#: interlayer spacing of graphite; Weber et al. 2010 and Blake et al., Appl. Phys. Lett. 91,
+#: 063124 (2007) took 0.34 nm), MoS2 0.65 nm (the value commonly taken for a monolayer; the
+#: layer pitch of bulk 2H-MoS2 is c/2 = 0.615 nm). N layers are one film of N × this.
+MONOLAYER_NM: dict[str, float] = {"graphene": 0.335, "MoS2": 0.65}
 
 
 def _data_file(name: str):
@@ -370,4 +392,4 @@ def read_yaml(path) -> IndexModel:
     return CompositeIndex(n_model, k_models[0], name=name, citation=citation)
 
 
-__all__ = ["MATERIALS", "Material", "read_csv", "read_yaml", "refractive_index"]
+__all__ = ["MATERIALS", "MONOLAYER_NM", "Material", "read_csv", "read_yaml", "refractive_index"]

@@ -1,14 +1,14 @@
 """`envmap_radiance(method="khr")`: glTF `KHR_materials_iridescence` under an environment map
 (SPEC §9, §10; `thinfilm_jax.shading.ibl`).
 
-The method is `ideal`'s split sum with the extension's `F_iridescence` (linear Rec. 709) at
-h = n in place of the film's band reflectance, applied per channel to the map's RGB:
-L = A(θ_o, α) · F(cos θ_o) ⊙ P(ω_r, α), returned in the observer's bands like every method
-(`colorimetry.rec709_to_bands`; `bands_to_rec709` gives the RGB back). Checked against independent quantities: the patch
-model's quadrature albedo A = Σ w (`brdf.microfacet.patch_quadrature`, not the map's albedo
-table), `khr_bands`, and the exact spectral bands (`rgb_reflectance`, Airy). One 8 × 16 map
-prefiltered with the default albedo table (64 × 33) and 3 levels: the films, roughnesses and
-view angles of a test are one batch of shading points (one compilation per method).
+The method is `ideal`'s split sum with the extension's `F_iridescence` (linear Rec. 709) at h = n in
+place of the film's band reflectance, applied per channel to the map's RGB: L = A(θ_o, α) · F(cos
+θ_o) ⊙ P(ω_r, α), returned in the observer's bands like every method (`colorimetry.rec709_to_bands`;
+`bands_to_rec709` gives the RGB back). Checked against independent quantities: the patch model's
+quadrature albedo A = Σ w (`brdf.microfacet.patch_quadrature`, not the map's albedo table),
+`khr_bands`, and the exact spectral bands (`rgb_reflectance`, Airy). One 8 × 16 map prefiltered with
+the default albedo table (64 × 33) and 3 levels: the films, roughnesses and view angles of a test
+are one batch of shading points (one compilation per method).
 """
 
 import jax

@@ -39,12 +39,13 @@ def test_schlick_tint_is_exact_at_normal_incidence_and_the_mirror_is_white():
 
 def test_khr_delta_e_is_one_convention_across_studies():
     """The same pair (a `khr` linear Rec. 709 colour, exact bands) gets the same CIEDE2000 from
-    `khr.delta_e_to_exact` (CIE 1931 2°), the render and scene studies (khr's values are the
-    bands, as `envmap_radiance` returns them: `rec709_to_bands` of its RGB, then the
-    per-pixel ΔE of `render.summarise`) and this bench (`models_bench.delta_e` of the same
-    bands): `colorimetry.delta_e2000_rec709`, to 1e-9 (measured ~1e-14). The bench's former convention (the reference's bands to Rec. 709, CIELAB with
-    the D65 white) differs from it by up to 0.93 ΔE (mean 0.17) on these colours, Stiles &
-    Burch bands (asserted > 0.05: the check tells the two conventions apart)."""
+    `khr.delta_e_to_exact` (CIE 1931 2°), the render and scene studies (khr's values are the bands,
+    as `envmap_radiance` returns them: `rec709_to_bands` of its RGB, then the per-pixel ΔE of
+    `render.summarise`) and this bench (`models_bench.delta_e` of the same bands):
+    `colorimetry.delta_e2000_rec709`, to 1e-9 (measured ~1e-14). The bench's former convention (the
+    reference's bands to Rec. 709, CIELAB with the D65 white) differs from it by up to 0.93 ΔE (mean
+    0.17) on these colours, Stiles & Burch bands (asserted > 0.05: the check tells the two
+    conventions apart)."""
     import colour
 
     from thinfilm_jax.spectral.khr import delta_e_to_exact

@@ -20,13 +20,13 @@ Three measurements (`run_models_bench`; the default run writes figures/models.js
    (`material_envmap_radiance`, RGB light × tint bands per channel) against the exact film
    (`material_envmap_radiance`, cross bands R_jk = `envmap_radiance(method="reference")`).
 
-ΔE: CIEDE2000 with the perfect mirror as white (`colorimetry.delta_e2000`) between band
-values, the convention of every study (SPEC §7); `khr` computes linear Rec. 709 (SPEC §10)
-and returns it in the bands like every method (`colorimetry.rec709_to_bands`, CAT02 from D65
-to the mirror's white), so its rows are `colorimetry.delta_e2000_rec709` of its RGB and
-compare in the same CIELAB as every other row. Statistics over θ_o ∈ [0°, 85°] and α ∈ {0.1, 0.3, 0.6}: mean and 95th
-percentile. Cost: the warm time of one call
-divided by its shading points (median of `repeats`; wall clock on a shared machine, noisy).
+ΔE: CIEDE2000 with the perfect mirror as white (`colorimetry.delta_e2000`) between band values, the
+convention of every study (SPEC §7); `khr` computes linear Rec. 709 (SPEC §10) and returns it in the
+bands like every method (`colorimetry.rec709_to_bands`, CAT02 from D65 to the mirror's white), so
+its rows are `colorimetry.delta_e2000_rec709` of its RGB and compare in the same CIELAB as every
+other row. Statistics over θ_o ∈ [0°, 85°] and α ∈ {0.1, 0.3, 0.6}: mean and 95th percentile. Cost:
+the warm time of one call divided by its shading points (median of `repeats`; wall clock on a shared
+machine, noisy).
 
 Example (the configuration of the smoke test; the run itself takes seconds to minutes):
     >>> from thinfilm_jax.studies.models_bench import FAMILIES, ModelsConfig

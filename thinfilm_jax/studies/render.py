@@ -24,13 +24,12 @@ published methods); improved reads it with its suns split off and shaded apart
 (`prefilter_envmap(sources=ibl.DEFAULT_SOURCES)`, `thinfilm_jax.shading.sources`), as
 `envmap_radiance(method="improved")` does with a plain map. khr (glTF `KHR_materials_iridescence`,
 not a default column) computes linear Rec. 709 RGB and returns it in the bands of the
-render's observer like every method (`envmap_radiance`: `colorimetry.rec709_to_bands`), so
-its ΔE is `colorimetry.delta_e2000_rec709`'s of its RGB, the convention of every study. Display: exposure
-× radiance, bands → display sRGB (`colorimetry.bands_to_srgb`: linear Rec. 709 with the
-mirror white adapted to D65, clipped, sRGB-encoded); the exposure maps the reference's 99th
-luminance percentile to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled
-values against the reference (`colorimetry.delta_e2000`, mirror white Y = 1), mean and p95 per
-panel.
+render's observer like every method (`envmap_radiance`: `colorimetry.rec709_to_bands`), so its ΔE is
+`colorimetry.delta_e2000_rec709`'s of its RGB, the convention of every study. Display: exposure ×
+radiance, bands → display sRGB (`colorimetry.bands_to_srgb`: linear Rec. 709 with the mirror white
+adapted to D65, clipped, sRGB-encoded); the exposure maps the reference's 99th luminance percentile
+to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled values against the reference
+(`colorimetry.delta_e2000`, mirror white Y = 1), mean and p95 per panel.
 
 Example (unit normals over the frame; the thickness texture stays in [250, 850] nm):
     >>> import numpy as np

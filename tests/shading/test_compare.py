@@ -96,3 +96,18 @@ def test_refuses_a_prefiltered_map():
     with pytest.raises(ValueError, match="EnvMap"):
         compare_methods(film, ALPHA, normal, view, prefilter_envmap(_sky(), **PREFILTER),
                         methods=("khr",))
+
+
+def test_colour_table_runs_for_one_film():
+    """For one film and one α the helper builds the `ColourTable` itself (`prefilter_colour`
+    with the given keyword arguments, a tiny table here) and reports the table's band
+    radiances and a finite, non-zero ΔE against the reference."""
+    _, normal, view = _points()
+    res = compare_methods(Film(400.0, 1.4, 1.6), ALPHA, normal, view, _sky(),
+                          methods=("colour_table",), prefilter=PREFILTER,
+                          colour=dict(resolution=(4, 8), n_view=4, n_azimuth=4,
+                                      brightness_resolution=(16, 32), n_cos=128))
+    assert not res.skipped and res.sources["colour_table"] is None
+    assert res.radiance["colour_table"].shape == (6, 3)
+    d = res.delta_e["colour_table"]
+    assert np.all(np.isfinite(d)) and d.max() > 0

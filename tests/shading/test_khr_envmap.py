@@ -1,13 +1,14 @@
 """`envmap_radiance(method="khr")`: glTF `KHR_materials_iridescence` under an environment map
 (SPEC §9, §10; `thinfilm_jax.shading.ibl`).
 
-The method is `ideal`'s split sum with the extension's `F_iridescence` (linear Rec. 709) at
-h = n in place of the film's band reflectance, applied per channel to the map's RGB:
-L = A(θ_o, α) · F(cos θ_o) ⊙ P(ω_r, α). Checked against independent quantities: the patch
-model's quadrature albedo A = Σ w (`brdf.microfacet.patch_quadrature`, not the map's albedo
-table), `khr_bands`, and the exact spectral bands (`rgb_reflectance`, Airy). One 8 × 16 map
-prefiltered with the default albedo table (64 × 33) and 3 levels: the films, roughnesses and
-view angles of a test are one batch of shading points (one compilation per method).
+The method is `ideal`'s split sum with the extension's `F_iridescence` (linear Rec. 709) at h = n in
+place of the film's band reflectance, applied per channel to the map's RGB: L = A(θ_o, α) · F(cos
+θ_o) ⊙ P(ω_r, α), returned in the observer's bands like every method (`colorimetry.rec709_to_bands`;
+`bands_to_rec709` gives the RGB back). Checked against independent quantities: the patch model's
+quadrature albedo A = Σ w (`brdf.microfacet.patch_quadrature`, not the map's albedo table),
+`khr_bands`, and the exact spectral bands (`rgb_reflectance`, Airy). One 8 × 16 map prefiltered with
+the default albedo table (64 × 33) and 3 levels: the films, roughnesses and view angles of a test
+are one batch of shading points (one compilation per method).
 """
 
 import jax
@@ -18,6 +19,8 @@ import pytest
 from thinfilm_jax import Film, ModelOptions, patch_radiance, prefilter_envmap, rgb_reflectance
 from thinfilm_jax.brdf.microfacet import patch_quadrature
 from thinfilm_jax.shading.ibl import envmap_radiance
+from thinfilm_jax.shading.prefilter import lookup_albedo, lookup_radiance
+from thinfilm_jax.spectral.colorimetry import bands_to_rec709, rec709_to_bands
 from thinfilm_jax.spectral.khr import khr_bands
 
 # a metal-like base (κ₃ > 0: enters through F₀ only), a soap-like film on glass, a high-index
@@ -72,7 +75,8 @@ N = np.array([0.0, 0.0, 1.0])
 def test_white_map_is_patch_khr(maps, batch):
     """A constant white map is the uniform light of `patch_radiance(method="khr")`, and a
     constant coloured one multiplies it channel by channel (the Rec. 709 F times the map's
-    RGB, no band mixing: what glTF engines compute).
+    RGB, no band mixing: what glTF engines compute; the outputs are bands, so the product is
+    checked on their RGB, `bands_to_rec709`).
 
     Measured max |envmap − patch| = 1.5e-4 (at α = 0.1, θ_o = 80°; relative 3.0e-4: the
     prefiltered albedo table's interpolation, the same for every film); asserted 2.5e-4.
@@ -83,27 +87,30 @@ def test_white_map_is_patch_khr(maps, batch):
     white = np.asarray(envmap_radiance(film, alpha, N, view, maps["white"], method="khr"))
     patch = np.asarray(patch_radiance(film, theta, alpha, method="khr"))
     assert np.abs(white - patch).max() <= 2.5e-4
-    np.testing.assert_allclose(patch, albedo[:, None] * np.asarray(
+    np.testing.assert_allclose(bands_to_rec709(patch), albedo[:, None] * np.asarray(
         khr_bands(film, jnp.asarray(np.cos(theta)))), rtol=0, atol=1e-12)
     colour = np.asarray(envmap_radiance(film, alpha, N, view, maps["colour"], method="khr"))
-    np.testing.assert_allclose(colour, white * COLOUR, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(bands_to_rec709(colour), bands_to_rec709(white) * COLOUR,
+                               rtol=0, atol=1e-12)
 
 
 def test_khr_minus_ideal_is_reflectance_difference(maps, batch):
-    """Under a constant map, envmap khr − envmap ideal = A · (F_khr − R_exact) at h = n,
+    """Under a constant map, envmap khr − envmap ideal = A · (F_khr − R_exact) at h = n, F_khr
+    taken to the bands (`rec709_to_bands`),
     R_exact the spectral Airy bands at cos θ_o (`rgb_reflectance`, SPEC §2), with `ideal` run
     with the exact Ŝ and M = 6 (its BB17 sum then converged: M = 2 leaves 2.3e-3).
 
-    Measured max residual 3.7e-5 (the albedo table's 3e-4 relative error of A times the
-    difference) against differences of up to 0.124; asserted 5e-5, and the differences
-    themselves ≥ 0.05 (khr is not the exact film).
+    Measured max residual 2.9e-5 (the albedo table's 3e-4 relative error of A times the
+    difference) against differences of up to 0.097 (in the bands; 0.124 when khr's RGB was
+    subtracted from the bands unconverted); asserted 5e-5, and the differences themselves
+    ≥ 0.05 (khr is not the exact film).
     """
     film, alpha, theta, view, albedo = batch
     khr = np.asarray(envmap_radiance(film, alpha, N, view, maps["white"], method="khr"))
     ideal = np.asarray(envmap_radiance(film, alpha, N, view, maps["white"], method="ideal",
                                        options=ModelOptions(shat="exact", terms=6)))
     c = np.cos(theta)
-    want = albedo[:, None] * (np.asarray(khr_bands(film, jnp.asarray(c)))
+    want = albedo[:, None] * (rec709_to_bands(np.asarray(khr_bands(film, jnp.asarray(c))))
                               - np.asarray(rgb_reflectance(film, c)))
     assert np.abs(want).max() > 0.05
     assert np.abs((khr - ideal) - want).max() <= 5e-5
@@ -112,7 +119,8 @@ def test_khr_minus_ideal_is_reflectance_difference(maps, batch):
 def test_any_map_is_read_at_the_mirror_direction(maps):
     """Under a non-constant map khr reads the prefiltered radiance `ideal` reads (mirror
     direction, level √α): per point and channel, L_khr(map) · L_ideal(white) =
-    L_ideal(map) · L_khr(white) = A² F R P with `ideal`'s diagonal (per-channel) form.
+    L_ideal(map) · L_khr(white) = A² F R P with `ideal`'s diagonal (per-channel) form and
+    khr's output in RGB (`bands_to_rec709`).
     Tilted normals and views; agreement to 1e-12 relative (measured 4e-16); the sky's
     radiance differs from white's by up to 0.44 there."""
     rng = np.random.default_rng(3)
@@ -124,6 +132,8 @@ def test_any_map_is_read_at_the_mirror_direction(maps):
     run = {(m, k): np.asarray(envmap_radiance(film, alpha, normal, view, maps[k], method=m,
                                               cross_band=False))
            for m in ("khr", "ideal") for k in ("sky", "white")}
+    run["khr", "sky"], run["khr", "white"] = (bands_to_rec709(run["khr", k]) for k in
+                                              ("sky", "white"))
     lhs = run["khr", "sky"] * run["ideal", "white"]
     rhs = run["ideal", "sky"] * run["khr", "white"]
     assert np.all(lhs[np.sum(normal * view, -1) > 0] > 0)  # every visible point lit
@@ -165,34 +175,98 @@ def test_gradients_finite(maps, dtype):
         np.testing.assert_allclose(grads[0], g64, rtol=1e-4, atol=1e-9)
 
 
-def test_below_horizon_black_and_refusals(maps):
-    """⟨n, ω_o⟩ ≤ 0 gives 0 (a normal facing away, an exactly grazing view); an observer other
-    than the default is a ValueError (the output is Rec. 709, as `patch_radiance(method=
-    "khr")`); so is a map with split sources (glTF engines shade the prefiltered map only)."""
+def test_below_horizon_black(maps):
+    """⟨n, ω_o⟩ ≤ 0 gives 0 (a normal facing away, an exactly grazing view)."""
     film = Film(400.0, 1.33, 1.5)
     normal = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
     view = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     out = np.asarray(envmap_radiance(film, 0.3, normal, view, maps["white"], method="khr"))
     assert np.all(out[:2] == 0) and np.all(out[2] > 0)
-    with pytest.raises(ValueError, match="observer"):
-        envmap_radiance(film, 0.3, N, N, maps["white"], method="khr", observer="cie_1931_2")
-    sun = np.full((16, 32, 3), 0.1)
-    sun[0, 5] = 500.0  # one texel of 0.004 sr: a source for `extract_sources`
-    pref = prefilter_envmap(sun, sources=1, **KW)
-    assert pref.has_sources
-    with pytest.raises(ValueError, match="sources"):
-        envmap_radiance(film, 0.3, N, N, pref, method="khr")
+
+
+@pytest.mark.parametrize("observer", ["stiles_burch_1959_10", "cie_1931_2"])
+def test_output_is_the_observers_bands(maps, observer):
+    """khr returns the observer's bands, as every method of `envmap_radiance`: glTF's linear
+    Rec. 709 A · F ⊙ P, built here from the map's own tables (`lookup_albedo`,
+    `lookup_radiance` at the mirror direction) and the formula (`khr_bands`), taken to the
+    bands by `colorimetry.rec709_to_bands` (host NumPy, the colour-science conversion);
+    measured agreement 1e-16, asserted 1e-13. Either observer is accepted (both have three
+    bands), and the bands differ from the RGB."""
+    rng = np.random.default_rng(5)
+    normal = rng.normal(size=(6, 3)) * [0.2, 0.2, 0.3] + [0.0, 0.0, 1.0]
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    film, alpha = Film(np.linspace(250.0, 650.0, 6), 1.4, 1.7), 0.3
+    view = np.array([0.3, 0.0, 0.954]) / np.linalg.norm([0.3, 0.0, 0.954])
+    got = np.asarray(envmap_radiance(film, alpha, normal, view, maps["sky"], method="khr",
+                                     observer=observer))
+    co = np.sum(normal * view, -1)
+    assert np.all(co > 0.3)  # every point faces the eye
+    refl = 2 * co[:, None] * normal - view
+    sqa = jnp.full(6, np.sqrt(alpha))
+    rgb = (np.asarray(lookup_albedo(maps["sky"], jnp.asarray(co), sqa))[:, None]
+           * np.asarray(lookup_radiance(maps["sky"], jnp.asarray(refl), sqa))
+           * np.asarray(khr_bands(film, jnp.asarray(co))))
+    np.testing.assert_allclose(got, rec709_to_bands(rgb, observer), rtol=0, atol=1e-13)
+    assert np.abs(got - rgb).max() > 1e-3
+
+
+def _sun_map(h=16, w=32):
+    """A dim bluish sky with a one-texel sun (0.004 sr at 16 × 32) at the zenith row."""
+    sun = np.full((h, w, 3), 0.1) * np.array([1.0, 0.9, 1.2])
+    sun[0, 5] = np.array([500.0, 450.0, 380.0])
+    return sun
+
+
+def test_map_with_suns_shades_them(maps):
+    """A map prefiltered with suns split off (`prefilter_envmap(sources=...)`, one map for
+    every real-time method) is shaded, not refused: the residual map as before plus the suns
+    through the GGX lobe times the same F_iridescence(cos θ_o) (`sources.source_light`).
+    Independent fact: the split is energy-exact, so under a rough lobe (α = 0.6, where the
+    prefiltered sun and the cap see nearly the same lobe) khr on the split map agrees with khr
+    on the unsplit map: measured max relative difference 0.030 where the split map gives
+    5.5–8.3× the residual alone (which is off by 0.88: what ignoring the suns would give);
+    asserted 0.15 and > 2×. The sun's term is one per-channel factor on F: the RGB ratio
+    split/residual is the same for two films (to 1e-12). The derivative in α through the suns'
+    caps matches a central difference (float64; measured relative 5e-10, asserted 1e-6)."""
+    kw = dict(levels=5, resolution=(16, 32))
+    split = prefilter_envmap(_sun_map(), sources=1, **kw)
+    plain = prefilter_envmap(_sun_map(), **kw)
+    assert split.has_sources
+    residual = split._replace(sources=None)
+    th = np.deg2rad([0.0, 20.0, 40.0])
+    view = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], -1)
+    sun_dir = np.asarray(split.sources.direction[0])
+    normal = sun_dir + view  # the sun in the mirror direction
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    out = {}
+    for name, pref in (("split", split), ("plain", plain), ("residual", residual)):
+        for i, film in enumerate((Film(400.0, 1.33, 1.5), Film(650.0, 1.8, 1.2))):
+            out[name, i] = bands_to_rec709(np.asarray(envmap_radiance(
+                film, 0.6, normal, view, pref, method="khr")))
+    for i in (0, 1):
+        rel = np.abs(out["split", i] - out["plain", i]) / out["plain", i]
+        assert rel.max() <= 0.15, rel.max()
+        assert np.all(out["split", i] > 2 * out["residual", i])
+    np.testing.assert_allclose(out["split", 0] / out["residual", 0],
+                               out["split", 1] / out["residual", 1], rtol=1e-12)
+
+    def loss(a):  # the suns' lobe term is differentiable: α's derivative against a difference
+        return jnp.sum(envmap_radiance(Film(400.0, 1.33, 1.5), a, normal, view, split,
+                                       method="khr"))
+
+    g, h = float(jax.grad(loss)(0.6)), 1e-5
+    assert np.isfinite(g) and g != 0
+    np.testing.assert_allclose(g, (loss(0.6 + h) - loss(0.6 - h)) / (2 * h), rtol=1e-6)
 
 
 def test_render_column_in_the_render_observers_bands(maps, batch):
     """`thinfilm-jax render --method khr` (`studies.render`): the column shades under a
-    render observer other than the default (khr's output is Rec. 709 whatever it is: the
-    shader drops the observer) and is taken to that observer's bands
-    (`khr.rec709_to_bands`) for display and ΔE; a flat reflectance's RGB (R, R, R) maps to
-    bands (R, R, R) in both observers (the map's white, equal-energy light, is the bands'
-    white). `render_one` itself is not run here: its sharded compilation and a second
-    observer's prefilter cost ~20 s on this machine."""
-    from thinfilm_jax.spectral.khr import rec709_to_bands
+    render observer other than the default and its values are that observer's bands, as
+    every method's: the default observer's output taken back to RGB (`bands_to_rec709`) and
+    to the render observer's bands (`rec709_to_bands`) is the same; a flat reflectance's RGB
+    (R, R, R) maps to bands (R, R, R) in both observers (the map's white, equal-energy light,
+    is the bands' white). `render_one` itself is not run here: its sharded compilation and a
+    second observer's prefilter cost ~20 s on this machine."""
     from thinfilm_jax.studies.render import _shade
 
     for obs in ("stiles_burch_1959_10", "cie_1931_2"):
@@ -201,5 +275,6 @@ def test_render_column_in_the_render_observers_bands(maps, batch):
     normal = np.broadcast_to(N, view.shape)
     got = _shade(film, normal, alpha, view, maps["white"], method="khr",
                  observer="cie_1931_2", options=ModelOptions(), subdivisions=None)
-    want = envmap_radiance(film, alpha, N, view, maps["white"], method="khr")
-    np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=0, atol=1e-15)
+    default = envmap_radiance(film, alpha, N, view, maps["white"], method="khr")
+    want = rec709_to_bands(bands_to_rec709(np.asarray(default)), "cie_1931_2")
+    np.testing.assert_allclose(np.asarray(got), want, rtol=0, atol=1e-14)

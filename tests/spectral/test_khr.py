@@ -388,15 +388,18 @@ def test_float32_close_to_float64():
 
 def test_patch_radiance_khr_is_albedo_times_khr():
     """`patch_radiance(method="khr")`: as `ideal`, the reflectance at h = n (cos θ_o) times the
-    albedo A(θ_o, α); d = 0 keeps the extension's formula (not the bare-base shortcut);
-    observers other than the default are rejected (the output is Rec. 709 RGB)."""
+    albedo A(θ_o, α); d = 0 keeps the extension's formula (not the bare-base shortcut). The
+    extension's linear Rec. 709 is returned in the observer's bands like every method, for
+    either observer: `rec709_to_bands` of A · F (the colour-science conversion checked in
+    `test_rec709_bands_round_trip_and_whites`), and `bands_to_rec709` gives A · F back."""
     opts = tf.ModelOptions(quadrature=(16, 16))
     films = tf.Film(np.array([0.0, 450.0]), 1.33, 1.5)
     theta, alpha = np.array([0.3, 1.1]), 0.25
-    got = np.asarray(tf.patch_radiance(films, theta, alpha, method="khr", options=opts))
     a = np.asarray(tf.albedo(theta, alpha, quadrature=(16, 16)))
-    want = a[:, None] * np.asarray(khr_reflectance(films, np.cos(theta)))
-    assert np.abs(got - want).max() <= 1e-15
-    with pytest.raises(ValueError, match="method='khr'"):
-        tf.patch_radiance(films, theta, alpha, method="khr", observer="cie_1931_2",
-                          options=opts)
+    rgb = a[:, None] * np.asarray(khr_reflectance(films, np.cos(theta)))
+    for observer in ("stiles_burch_1959_10", "cie_1931_2"):
+        got = np.asarray(tf.patch_radiance(films, theta, alpha, method="khr", options=opts,
+                                           observer=observer))
+        np.testing.assert_allclose(got, K.rec709_to_bands(rgb, observer), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(K.bands_to_rec709(got, observer), rgb, rtol=0, atol=1e-14)
+        assert np.abs(got - rgb).max() > 1e-3  # the bands are not the RGB

@@ -27,24 +27,25 @@ def test_models_suite_quick_writes_its_outputs(tmp_path):
 
 def test_schlick_tint_is_exact_at_normal_incidence_and_the_mirror_is_white():
     """F₀ of the tint is the film's band reflectance at c = 1 (so the tint and the film agree
-    at normal view of a mirror-like lobe), and `khr`'s Rec. 709 is compared with the mirror as
-    white: RGB (1, 1, 1) is ΔE 0 to the mirror's bands (measured 0.0), a 10 % darker grey is
-    ΔE > 1 (measured 2.3)."""
+    at normal view of a mirror-like lobe), and `khr`'s Rec. 709, returned in the bands, is
+    compared with the mirror as white: RGB (1, 1, 1) is bands (1, 1, 1), ΔE 0 to the mirror
+    (measured 0.0), a 10 % darker grey is ΔE > 1 (measured 2.3)."""
     film = Film(600.0, 1.3, 2.0, 0.5)
     np.testing.assert_allclose(tint_f0(film), rgb_reflectance(film, 1.0), atol=1e-15)
     np.testing.assert_allclose(C.bands_to_rec709(np.ones(3)), 1.0, atol=1e-12)
-    assert float(delta_e("khr", np.ones(3), np.ones(3))) < 1e-9
-    assert float(delta_e("khr", np.full(3, 0.9), np.ones(3))) > 1
+    assert float(delta_e("khr", C.rec709_to_bands(np.ones(3)), np.ones(3))) < 1e-9
+    assert float(delta_e("khr", C.rec709_to_bands(np.full(3, 0.9)), np.ones(3))) > 1
 
 
 def test_khr_delta_e_is_one_convention_across_studies():
     """The same pair (a `khr` linear Rec. 709 colour, exact bands) gets the same CIEDE2000 from
-    `khr.delta_e_to_exact` (CIE 1931 2°), the render study (`render.method_bands` then the
-    per-pixel ΔE of `render.summarise`), the scene study (`render.method_bands`) and this
-    bench (`models_bench.delta_e`): `colorimetry.delta_e2000_rec709`, to 1e-9 (measured
-    ~1e-14). The bench's former convention (the reference's bands to Rec. 709, CIELAB with
-    the D65 white) differs from it by up to 0.93 ΔE (mean 0.17) on these colours, Stiles &
-    Burch bands (asserted > 0.05: the check tells the two conventions apart)."""
+    `khr.delta_e_to_exact` (CIE 1931 2°), the render and scene studies (khr's values are the bands,
+    as `envmap_radiance` returns them: `rec709_to_bands` of its RGB, then the per-pixel ΔE of
+    `render.summarise`) and this bench (`models_bench.delta_e` of the same bands):
+    `colorimetry.delta_e2000_rec709`, to 1e-9 (measured ~1e-14). The bench's former convention (the
+    reference's bands to Rec. 709, CIELAB with the D65 white) differs from it by up to 0.93 ΔE (mean
+    0.17) on these colours, Stiles & Burch bands (asserted > 0.05: the check tells the two
+    conventions apart)."""
     import colour
 
     from thinfilm_jax.spectral.khr import delta_e_to_exact
@@ -59,7 +60,7 @@ def test_khr_delta_e_is_one_convention_across_studies():
         # render: khr's values go to the bands once, then the per-pixel ΔE of every method
         r = {"label": "x", "scene": "fig4", "envmap": "m", "alpha": 0.25,
              "mask": np.ones(len(rgb), bool), "times": {"reference": 1.0, "khr": 1.0},
-             "values": {"reference": bands, "khr": R.method_bands("khr", rgb, observer)}}
+             "values": {"reference": bands, "khr": C.rec709_to_bands(rgb, observer)}}
         cfg = R.RenderConfig(methods=("reference", "khr"), observer=observer, exposure=1.0)
         got = R.summarise([r], cfg)["renders"][0]["dE2000"]["khr"]
         np.testing.assert_allclose([got["mean"], got["max"]], [want.mean(), want.max()],
@@ -67,7 +68,8 @@ def test_khr_delta_e_is_one_convention_across_studies():
         if observer == "cie_1931_2":
             np.testing.assert_allclose(delta_e_to_exact(rgb, bands), want, rtol=0, atol=1e-9)
         else:
-            np.testing.assert_allclose(delta_e("khr", rgb, bands), want, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(delta_e("khr", C.rec709_to_bands(rgb), bands), want,
+                                       rtol=0, atol=1e-9)
             cs = colour.RGB_COLOURSPACES["ITU-R BT.709"]
             ref_rgb = C.bands_to_rec709(bands)
             old = colour.delta_E(*(colour.XYZ_to_Lab(colour.RGB_to_XYZ(x, cs),

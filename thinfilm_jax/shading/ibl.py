@@ -9,7 +9,7 @@ $$ L_j(n, \omega_o) = \sum_k \int \tilde\rho(\omega_i, \omega_o)\langle n,\omega
 | `mc`        | GGX visible-normal sampling (Heitz 2018), weight G₂/G₁, exact spectral R_jk per sample, nearest-texel radiance; fixed key and count |
 | `ideal`     | A(θ_o, α) · Σ_k R_jk(cos θ_o) P_k(ω_r, α): BB17 under the split sum (`kernels.ideal_kernel`, Ŝ from the LUT at σ = 0 by default) |
 | `filtered`  | A(θ_o, α) · Σ_k R̄_jk P_k(ω_r, α), R̄ = K 29 with the prefiltered moments μ_ω, Σ_ω (`kernels.filtered_kernel`; Ŝ read with 8 taps, linear in \|μ\| and cubic in σ: `MAP_SHAT_READ`) |
-| `khr`       | A(θ_o, α) · F_iridescence(cos θ_o) ⊙ P(ω_r, α): glTF `KHR_materials_iridescence` (SPEC §10, `spectral.khr`) at h = n as `ideal`, per channel: its linear Rec. 709 RGB times the map's linear RGB, the vec3 Fresnel × vec3 prefiltered specular product glTF engines compute (the Khronos sample renderer's `pbr.frag` reads F_iridescence at ⟨n, v⟩ and multiplies the prefiltered radiance by it with no split-sum scale: its value is this one over A); `cross_band`, `options` and the map's Ŝ table do not apply; a map with split sources is refused |
+| `khr`       | A(θ_o, α) · F_iridescence(cos θ_o) ⊙ P(ω_r, α): glTF `KHR_materials_iridescence` (SPEC §10, `spectral.khr`) at h = n as `ideal`, per channel: its linear Rec. 709 RGB times the map's linear RGB, the vec3 Fresnel × vec3 prefiltered specular product glTF engines compute (the Khronos sample renderer's `pbr.frag` reads F_iridescence at ⟨n, v⟩ and multiplies the prefiltered radiance by it with no split-sum scale: its value is this one over A); suns split from the map add F_iridescence(cos θ_o) ⊙ Σ_s m_s L_s (the same Fresnel for every light, as the renderer's punctual lights; `sources.source_light`); the RGB sum is then taken to the observer's bands by the library's one conversion (`colorimetry.rec709_to_bands`, exact and invertible: `bands_to_rec709` gives the engine's RGB back), so every method returns the same space; `cross_band`, `options` and the map's Ŝ table do not apply |
 | `colour_table` | A(θ_o, α) · Σ_k C_jk(ω_r, θ_o) P_k(ω_r, α): Kneiphof & Klein 2022, the colour R_jk prefiltered with the map and the GGX lobe into a table over (ω_r, θ_o), decomposed into a map of ω_r times a function of θ_o (`colour_table`, SPEC §11); `envmap` is the `ColourTable` that `prefilter_colour` built for this film and α (checked) |
 | `improved`  | A(θ_o, α) · (1/K) Σ_b Σ_k R_jk(bin b) P_k,b: K 29 per equal-probability bin b of cos θ₁, each bin times read b of K prefiltered reads fitted to the lobe's shape (`improved.lookup_reads`), at the bin's cosine moved by the read's light-weighted mean direction (`ibl.improved_envmap`, docs/improved.md) |
 
@@ -65,12 +65,13 @@ from .ibl_reference import auto_subdivisions, exact_radiance  # noqa: F401 (re-e
 from ..optics.fresnel import safe_sqrt
 from ..realtime.improved import BinTable, bin_bands, bin_table, lookup_bins, scan_bins
 from ..realtime.kernels import filtered_kernel, ideal_kernel
+from ..spectral.colorimetry import rec709_to_band_matrix
 from ..spectral.khr import khr_bands
 from ..spectral.lut import ShatLUT, build_shat_lut
 from ..realtime.options import ModelOptions, check_options
 from .prefilter import (PrefilteredEnvMap, bin_radiance_parts, lookup_albedo, lookup_prefiltered,
                         lookup_radiance, moments_to_mean_cov, prefilter_envmap)
-from .sources import source_radiance
+from .sources import source_light, source_radiance
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from ..spectral.uplift import cross_band_name
 
@@ -107,10 +108,12 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
             or `PrefilteredEnvMap` (real-time methods only; build it once); for
             "colour_table" the `ColourTable` of `prefilter_colour(map, film, alpha)`.
         method: "reference" | "mc" | "ideal" | "filtered" | "improved" | "khr" (glTF
-            `F_iridescence` in linear Rec. 709 under the split sum, module table; its
-            observer must stay the default, and a `PrefilteredEnvMap` with sources is
-            refused: engines shade the prefiltered map only).
-        observer: colour bands.
+            `F_iridescence` under the split sum, module table: computed in linear Rec. 709
+            as engines do, returned in the observer's bands like every method,
+            `colorimetry.rec709_to_bands`; suns split from the map are shaded with the same
+            per-channel Fresnel).
+        observer: colour bands of the result, for every method (ΔE between any two methods:
+            `colorimetry.delta_e2000`; `shading.compare.compare_methods` runs several).
         options: `ModelOptions` (default `REALTIME_OPTIONS`: shat="lut", the map's table;
             shat="auto", `ModelOptions()`'s, is "lut" here, so equal options give one program):
             terms = Fourier orders M and shat = Ŝ source of the real-time methods,
@@ -150,9 +153,6 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
     if method == "colour_table" or isinstance(envmap, ColourTable):
         return _colour_table(film, alpha, normal, view, envmap, method, observer)
     V.check_choice("observer", observer, OBSERVERS)
-    if method == "khr" and observer != DEFAULT_OBSERVER:
-        raise ValueError(f"method='khr' gives linear Rec. 709 RGB: observer={observer!r} "
-                         f"does not apply (leave the default)")
     options = check_options(options, shat_auto="lut")  # "auto": the map's Ŝ table
     if options.ndf != "ggx":
         raise ValueError(f"envmap_radiance supports ndf='ggx' only (the prefiltered maps and "
@@ -178,9 +178,6 @@ def envmap_radiance(film: Film, alpha, normal, view, envmap, *, method: str = "r
         pref = prefilter_envmap(envmap, observer=observer, sources=sources)
     else:
         env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
-    if method == "khr" and pref.has_sources:
-        raise ValueError("method='khr' shades the prefiltered map only (as glTF engines do): "
-                         "prefilter it with sources=0")
     dtype = jnp.result_type(alpha, normal, view, *jax.tree.leaves(film), float)
     film = jax.tree.map(lambda x: _broadcast(x, dtype, shape), film)
     alpha = _broadcast(alpha, dtype, shape)
@@ -371,6 +368,8 @@ def _chunk(xs, pref, cfg):
 def _realtime_points(film, alpha, normal, view, pref, cfg):
     """The map's method plus the sources split from it (if any), at flat shading points."""
     method, observer, terms, shat, cross, arithmetic, _ = cfg
+    if method == "khr":
+        return _khr_points(film, alpha, normal, view, pref, observer)
     out = _map_points(film, alpha, normal, view, pref, cfg)
     pref = pref[0] if method == "improved" else pref
     if pref.has_sources:
@@ -380,6 +379,27 @@ def _realtime_points(film, alpha, normal, view, pref, cfg):
                                     observer=observer, terms=terms, shat=shat, lut=lut,
                                     arithmetic=arithmetic, cross_band=cross)
     return out
+
+
+def _khr_points(film, alpha, normal, view, pref, observer):
+    """`khr` at flat shading points (module table): per channel, Rec. 709 F_iridescence(cos θ_o)
+    × (A · the prefiltered map's RGB + the split suns' Σ_s m_s L_s), then to the bands."""
+    cos_o = jnp.sum(normal * view, axis=-1)
+    up = cos_o > 0
+    co = jnp.where(up, cos_o, 1.0)
+    sqa = jnp.sqrt(alpha)
+    rad = lookup_radiance(pref, 2 * co[..., None] * normal - view, sqa)
+    light = lookup_albedo(pref, co, sqa)[..., None] * rad
+    if pref.has_sources:  # the same Fresnel for every light, as the renderer's punctual ones
+        light = light + source_light(alpha, normal, view, pref.sources)
+    rgb = jnp.where(up[..., None], khr_bands(film, co) * light, 0.0)
+    return _rec709_to_bands(rgb, observer)
+
+
+def _rec709_to_bands(rgb, observer):
+    """`colorimetry.rec709_to_bands` on a JAX array (its 3×3 matrix as a constant)."""
+    m = jnp.asarray(rec709_to_band_matrix(observer), rgb.dtype)
+    return jnp.matmul(rgb, m.T, precision=HIGHEST)
 
 
 def _map_points(film, alpha, normal, view, pref, cfg):
@@ -398,8 +418,6 @@ def _map_points(film, alpha, normal, view, pref, cfg):
     sqa = jnp.sqrt(alpha)
     rad, mom = lookup_prefiltered(pref, refl, sqa)
     a = lookup_albedo(pref, co, sqa)
-    if method == "khr":  # per channel: Rec. 709 F_iridescence(cos θ_o) × the map's RGB
-        return jnp.where(up[..., None], a[..., None] * khr_bands(film, co) * rad, 0.0)
     obs = cross_band_name(observer) if cross else observer
     lut = pref.lut if cross else None
     if shat == "lut" and not cross:  # the diagonal path reads the plain bands' table

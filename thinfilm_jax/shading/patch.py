@@ -11,7 +11,7 @@ $$ L_j(\theta_o, \alpha) = \int \tilde\rho(\omega_i, \omega_o)\langle n, \omega_
 | ``filtered_gt_opd``   | A · K 29 with the true mean and std of D under p_R               |
 | ``filtered``          | A · K 29 with μ_ω, Σ_ω of the split-sum prefiltered uniform environment |
 | ``improved``          | A · K 29 per equal-probability bin of cos θ₁ (`improved`, docs/improved.md) |
-| ``khr``               | A · glTF `F_iridescence`(cos θ_o) (SPEC §10, h = n; linear Rec. 709) |
+| ``khr``               | A · glTF `F_iridescence`(cos θ_o) (SPEC §10, h = n): its linear Rec. 709 taken to the bands (`colorimetry.rec709_to_bands`) |
 
 A(θ_o, α) = Σ_n w_n is the prefiltered BRDF (exact quadrature, K 12). The quadrature
 (`microfacet.patch_quadrature`) is deterministic and film-independent; its convergence and
@@ -59,6 +59,7 @@ from ..brdf.microfacet import (light_moments, patch_quadrature, sample_patch_mc,
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..optics.opd import cos_incidence_from_projection, opd_moments_exact, project_light_moments
 from ..realtime.options import ModelOptions, check_options
+from ..spectral.colorimetry import rec709_to_band_matrix
 from ..spectral.khr import khr_bands
 from ..spectral.reflectance import (band_centroids, bare_bands, choose_layer, per_band,
                                     spectral_bands, stack_bands)
@@ -101,7 +102,8 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
         theta_o: view angle θ_o ∈ [0, π/2] (radians).
         alpha: GGX roughness α ∈ (0, 1].
         method: one of `METHODS` (SPEC §7).
-        observer: colour bands.
+        observer: colour bands of the result, for every method ("khr" computes glTF's
+            linear Rec. 709 and returns it in these bands, `colorimetry.rec709_to_bands`).
         options: `ModelOptions` — terms (M of the non-reference methods; K 29 uses 2),
             shat (Ŝ source of K 29: "exact", "lut" or "gaussian"), ndf, quadrature
             (n_u, n_φ) of the half-vector quadrature, arithmetic ("auto" specialises a
@@ -212,10 +214,9 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
     o = options
     quad = patch_quadrature(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
     if method == "khr":  # as `ideal`; its d = 0 is its own formula, not the bare base
-        if observer != DEFAULT_OBSERVER:
-            raise ValueError(f"method='khr' gives linear Rec. 709 RGB: observer={observer!r} "
-                             f"does not apply (leave the default)")
-        return jnp.sum(quad.weight) * khr_bands(film, jnp.cos(theta_o))
+        rgb = jnp.sum(quad.weight) * khr_bands(film, jnp.cos(theta_o))  # linear Rec. 709
+        m = jnp.asarray(rec709_to_band_matrix(observer), rgb.dtype)  # the bands, as every method
+        return jnp.matmul(m, rgb, precision=jax.lax.Precision.HIGHEST)
     if o.layer == "bare":
         return _bare_patch(film, theta_o, alpha, quad, method, observer, o, table)
     if method == "reference":

@@ -407,3 +407,26 @@ def source_radiance(film: Film, alpha, normal, view, sources: Sources, *, observ
             r = r * light
         out = jnp.sum(r * mass[..., None], axis=-2)
     return jnp.where(up[..., None], out, 0.0)
+
+
+def source_light(alpha, normal, view, sources: Sources, *,
+                 rule: tuple[int, int] = DEFAULT_CAP_RULE) -> Array:
+    """Σ_s m_s L_s (..., 3): the caps' RGB radiance through the GGX lobe with no film term
+    (m_s the lobe mass of cap s, module docstring), 0 for S = 0 and where ⟨n, ω_o⟩ ≤ 0. What
+    a per-channel Fresnel that does not depend on the light direction multiplies (the `khr`
+    method, which reads glTF's F_iridescence at ⟨n, ω_o⟩ for every light as engines do)."""
+    shape = normal.shape[:-1]
+    if sources.count == 0:
+        return jnp.zeros(shape + (3,), normal.dtype)
+    nodes, wts = cap_nodes(sources.astype(normal.dtype), rule)  # (S, Q, 3), (S, Q)
+    cos_o = _dot(normal, view)
+    up = cos_o > 0
+    co = jnp.where(up, cos_o, 1.0)
+    alpha = jnp.asarray(alpha)
+    light = sources.radiance.astype(normal.dtype)  # (S, 3)
+    out = jnp.zeros(shape + (3,), normal.dtype)
+    for s in range(sources.count):
+        c_axis = _dot(view, sources.direction[s].astype(normal.dtype))
+        m = _cap_sums(nodes[s], wts[s], normal, view, alpha, co, c_axis)[0]
+        out = out + m[..., None] * light[s]
+    return jnp.where(up[..., None], out, 0.0)

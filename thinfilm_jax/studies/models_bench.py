@@ -20,13 +20,13 @@ Three measurements (`run_models_bench`; the default run writes figures/models.js
    (`material_envmap_radiance`, RGB light × tint bands per channel) against the exact film
    (`material_envmap_radiance`, cross bands R_jk = `envmap_radiance(method="reference")`).
 
-ΔE: CIEDE2000 with the perfect mirror as white (`colorimetry.delta_e2000`) between band
-values, the convention of every study (SPEC §7); `khr` returns linear Rec. 709 (SPEC §10), so
-its rows take it to the reference's bands first (`colorimetry.delta_e2000_rec709`:
-`rec709_to_bands`, CAT02 from D65 to the mirror's white) and compare in the same CIELAB as
-every other row. Statistics over θ_o ∈ [0°, 85°] and α ∈ {0.1, 0.3, 0.6}: mean and 95th
-percentile. Cost: the warm time of one call
-divided by its shading points (median of `repeats`; wall clock on a shared machine, noisy).
+ΔE: CIEDE2000 with the perfect mirror as white (`colorimetry.delta_e2000`) between band values, the
+convention of every study (SPEC §7); `khr` computes linear Rec. 709 (SPEC §10) and returns it in the
+bands like every method (`colorimetry.rec709_to_bands`, CAT02 from D65 to the mirror's white), so
+its rows are `colorimetry.delta_e2000_rec709` of its RGB and compare in the same CIELAB as every
+other row. Statistics over θ_o ∈ [0°, 85°] and α ∈ {0.1, 0.3, 0.6}: mean and 95th percentile. Cost:
+the warm time of one call divided by its shading points (median of `repeats`; wall clock on a shared
+machine, noisy).
 
 Example (the configuration of the smoke test; the run itself takes seconds to minutes):
     >>> from thinfilm_jax.studies.models_bench import FAMILIES, ModelsConfig
@@ -53,7 +53,7 @@ from ..shading.material_ibl import material_envmap_radiance
 from ..shading.material_patch import material_patch_radiance
 from ..shading.patch import patch_radiance
 from ..shading.prefilter import prefilter_envmap
-from ..spectral.colorimetry import bands_to_srgb, delta_e2000, delta_e2000_rec709
+from ..spectral.colorimetry import bands_to_srgb, delta_e2000
 from ..spectral.reflectance import rgb_reflectance
 from ._timing import environment, jsonable, time_call
 
@@ -134,9 +134,9 @@ def _stats(de) -> dict:
 
 
 def delta_e(method: str, test, ref) -> np.ndarray:
-    """ΔE₀₀ of `method`'s values against the reference's bands (module docstring): `khr`'s
-    linear Rec. 709 by `colorimetry.delta_e2000_rec709`, the others by `delta_e2000`."""
-    return delta_e2000_rec709(test, ref) if method == "khr" else delta_e2000(test, ref)
+    """ΔE₀₀ of `method`'s values against the reference's bands (module docstring): every
+    method returns the bands (`khr` its Rec. 709 taken to them), so `delta_e2000` for all."""
+    return delta_e2000(test, ref)
 
 
 def _timed(fn, args, repeats, points):
@@ -288,9 +288,9 @@ def write_markdown(result: dict, path: Path):
         _table(result["film_methods"], ["grid", "method", "dE2000_mean", "dE2000_p95",
                                         "dE2000_max", "warm_s_per_point"],
                ["grid", "method", "ΔE mean", "ΔE p95", "ΔE max", "s/pt"]),
-        "", "`khr` is linear Rec. 709 (SPEC §10): its output is taken to the reference's bands "
-        "(`colorimetry.rec709_to_bands`, CAT02 from D65 to the mirror's white) and compared "
-        "like every other row (`colorimetry.delta_e2000_rec709`).", "",
+        "", "`khr` computes linear Rec. 709 (SPEC §10) and returns it in the reference's bands "
+        "(`colorimetry.rec709_to_bands`, CAT02 from D65 to the mirror's white): its rows are "
+        "`colorimetry.delta_e2000_rec709` of its RGB, compared like every other row.", "",
         f"## 3. Under the shipped maps ({', '.join(result['config']['map_names'])}) at "
         f"{result['ibl']['map_shape']} texels, {result['ibl']['sphere']} sphere points, GGX "
         f"α = {result['ibl']['alpha']} (`improved` without the suns split off)", "",

@@ -23,14 +23,13 @@ float32 frame timings are in the benchmark). ideal and filtered read the map as 
 published methods); improved reads it with its suns split off and shaded apart
 (`prefilter_envmap(sources=ibl.DEFAULT_SOURCES)`, `thinfilm_jax.shading.sources`), as
 `envmap_radiance(method="improved")` does with a plain map. khr (glTF `KHR_materials_iridescence`,
-not a default column) shades linear Rec. 709 RGB: its values are taken to the bands of the
-render's observer (`method_bands`: `colorimetry.rec709_to_bands`) before display and ΔE, so
-its ΔE is `colorimetry.delta_e2000_rec709`'s, the convention of every study. Display: exposure
-× radiance, bands → display sRGB (`colorimetry.bands_to_srgb`: linear Rec. 709 with the
-mirror white adapted to D65, clipped, sRGB-encoded); the exposure maps the reference's 99th
-luminance percentile to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled
-values against the reference (`colorimetry.delta_e2000`, mirror white Y = 1), mean and p95 per
-panel.
+not a default column) computes linear Rec. 709 RGB and returns it in the bands of the
+render's observer like every method (`envmap_radiance`: `colorimetry.rec709_to_bands`), so its ΔE is
+`colorimetry.delta_e2000_rec709`'s of its RGB, the convention of every study. Display: exposure ×
+radiance, bands → display sRGB (`colorimetry.bands_to_srgb`: linear Rec. 709 with the mirror white
+adapted to D65, clipped, sRGB-encoded); the exposure maps the reference's 99th luminance percentile
+to 0.9 unless given. Errors: CIEDE2000 per pixel of exposure-scaled values against the reference
+(`colorimetry.delta_e2000`, mirror white Y = 1), mean and p95 per panel.
 
 Example (unit normals over the frame; the thickness texture stays in [250, 850] nm):
     >>> import numpy as np
@@ -58,7 +57,7 @@ import numpy as np
 
 from ..core._io import atomic_write, write_json
 from ..optics.airy import choose_arithmetic
-from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000, rec709_to_bands
+from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
 from ..spectral.spectra import DEFAULT_OBSERVER
 from ..shading.envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..core.film import Film
@@ -166,8 +165,6 @@ def _view_azimuth(env) -> float:
 
 def _shade(film, normal, alpha, view, envmap, *, method, observer, options, subdivisions):
     """One block of shading points (the function `map_sharded` runs on every device)."""
-    if method == "khr":  # Rec. 709 RGB whatever the render's observer (`method_bands`)
-        observer = DEFAULT_OBSERVER
     return envmap_radiance(film, alpha, normal, view, envmap, method=method, observer=observer,
                            options=options, subdivisions=subdivisions)
 
@@ -272,7 +269,7 @@ def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
             t0 = time.perf_counter()
             vals = to_host(shade(film, pts, alpha, wo, src))
             out["times"][method] = time.perf_counter() - t0
-        out["values"][method] = method_bands(method, vals, cfg.observer)
+        out["values"][method] = np.asarray(vals)  # every method in the observer's bands
     d = (np.arange(cfg.resolution) + 0.5) / cfg.resolution * 2 - 1
     bx, by = np.meshgrid(d, -d)
     bg_dir = -wo + 0.6 * (bx[..., None] * right + by[..., None] * up)
@@ -280,12 +277,6 @@ def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
     out["background"] = np.asarray(lookup_bilinear(env.radiance, bg_dir))
     out["film_thickness"] = np.asarray(np.broadcast_to(film.thickness, mask[mask].shape))
     return out
-
-
-def method_bands(method: str, values, observer: str) -> np.ndarray:
-    """`method`'s shaded values in the bands of `observer`: `khr`'s linear Rec. 709 through
-    `colorimetry.rec709_to_bands` (SPEC §10), every other method's bands as they are."""
-    return rec709_to_bands(values, observer) if method == "khr" else np.asarray(values)
 
 
 def _exposure(r, cfg):

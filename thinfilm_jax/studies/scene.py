@@ -12,7 +12,7 @@ Colour. The map's linear RGB c(ω) is the spectrum Σ_k c_k B_k(λ) of the Malle
 basis (SPEC §9, `spectral.uplift`); seen in a perfect mirror its band j is
 Σ_k M_jk c_k with M_jk = ∫ S_j B_k dλ (`colorimetry.uplift_to_bands`), so the background and
 the sphere are in the same bands (`khr`'s Rec. 709 is taken to them by
-`colorimetry.rec709_to_bands`, `render.method_bands`). Every image is kept in the observer's
+`colorimetry.rec709_to_bands` inside `envmap_radiance`). Every image is kept in the observer's
 bands (the NPZ) and converted once, by the library's one conversion: bands → linear Rec. 709
 = linear sRGB with the mirror white adapted to D65 (CAT02; `colorimetry.bands_to_rec709`, the
 EXR, unexposed) and → display sRGB (`colorimetry.bands_to_srgb` at the exposure, IEC
@@ -96,7 +96,7 @@ from ..spectral.colorimetry import (bands_to_rec709, bands_to_srgb, bands_to_xyz
                                     uplift_to_bands)
 from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 from ..spectral.uplift import basis_on
-from .render import PANEL_DPI, fit_title, method_bands, panel_inches
+from .render import PANEL_DPI, fit_title, panel_inches
 
 OWN_SCENES = ("sphere", "bubble")
 DISTANCE = 5.0  # camera distance / sphere radius
@@ -422,7 +422,7 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
         else:
             pref = method_map(cache, "map", m, cfg.observer)
             prefilter[m] = time.perf_counter() - t0  # 0 when an earlier method built it
-            obs = DEFAULT_OBSERVER if m == "khr" else cfg.observer
+            obs = cfg.observer
             q = ModelOptions.preset(cfg.quality)  # bins and reads; bin_reads=g alone is g
             opts = REALTIME_OPTIONS._replace(bins=q.bins, bin_reads=max(q.bin_reads,
                                                                         cfg.bin_reads),
@@ -433,7 +433,7 @@ def shade_sphere(cfg: SceneConfig, env, progress: bool = True):
                                                   method=m, observer=obs, options=opts))
 
             t0 = time.perf_counter()
-            out = method_bands(m, shade(), cfg.observer)
+            out = shade()  # every method in the observer's bands
             seconds[m] = time.perf_counter() - t0
             t1 = time.perf_counter()
             shade()  # the second call: compiled, warm

@@ -225,9 +225,17 @@ def _layer_stack(template, layer: int) -> Stack:
     return stack
 
 
-def _geometry(theta_o, alpha):
-    """(cosines (N,), weights (N,)) at which the reflectance is averaged: the mirror view, or
-    the SPEC §7 patch quadrature of a rough surface under uniform light."""
+def _geometry(theta_o, alpha, na=None, stack=None, layer=0, wavelengths=None, hi=None):
+    """(cosines (N,), weights (N,)) at which the reflectance is averaged: the mirror view,
+    the SPEC §7 patch quadrature of a rough surface under uniform light, or a microscope
+    objective's cone of numerical aperture `na` (SPEC §14, `optics.objective.cone_nodes`:
+    uniform in the pupil, nodes enough for the layer at `hi` nm)."""
+    if na is not None:
+        from ..optics.objective import cone_nodes
+
+        d = np.array(np.asarray(stack.thickness, float))
+        d[..., layer] = float(hi) if hi is not None else d[..., layer]
+        return cone_nodes(stack, wavelengths, na, thickness_max=d)
     if alpha is None:
         return np.asarray([np.cos(theta_o)]), np.asarray([1.0])
     quad = patch_quadrature(jnp.float64(theta_o), jnp.float64(alpha), quadrature=_QUADRATURE)
@@ -248,13 +256,16 @@ def _colours(d, stack, layer, cos, qw, lam, weights):
 
 
 def photo_colours(template, thickness, *, camera: Camera, theta_o=0.0, alpha=None,
-                  layer: int = 0):
+                  layer: int = 0, na=None):
     """The camera colours s(d) (..., 3) of the template with layer `layer` at `thickness`
-    (..., nm), white-balanced to the camera's light (a white reflector reads 1)."""
+    (..., nm), white-balanced to the camera's light (a white reflector reads 1); `na`: seen
+    through a microscope objective of that numerical aperture (SPEC §14)."""
     stack = _layer_stack(V.check_material(template, "template",
                                           wavelengths=camera.wavelengths), layer)
-    cos, qw = _geometry(float(theta_o), alpha)
     d = np.asarray(thickness, float)
+    _check_na(na, theta_o, alpha)
+    cos, qw = _geometry(float(theta_o), alpha, na, stack, layer, camera.wavelengths,
+                        float(np.max(d, initial=0.0)))
     s, _ = _colours(jnp.asarray(d.ravel()), stack, layer, jnp.asarray(cos), jnp.asarray(qw),
                     jnp.asarray(camera.wavelengths), jnp.asarray(camera.weights))
     return np.asarray(s).reshape(*d.shape, -1)
@@ -262,13 +273,13 @@ def photo_colours(template, thickness, *, camera: Camera, theta_o=0.0, alpha=Non
 
 def render_photo(template, thickness, *, camera="srgb", illuminant="D65", theta_o=0.0,
                  alpha=None, layer: int = 0, exposure: float = 1.0,
-                 white_balance=(1.0, 1.0, 1.0)) -> np.ndarray:
+                 white_balance=(1.0, 1.0, 1.0), na=None) -> np.ndarray:
     """A linear photograph (H, W, 3) of the template with the thickness map `thickness`
     (H, W): exposure · wb_c · s_c(d) of the module docstring (no noise, no encoding). The
     same model `fit_photo` fits: for tests and examples; studies render independently."""
     cam = camera_response(camera, illuminant)
     s = photo_colours(template, thickness, camera=cam, theta_o=theta_o, alpha=alpha,
-                      layer=layer)
+                      layer=layer, na=na)
     return exposure * np.asarray(white_balance, float) * s
 
 
@@ -353,6 +364,19 @@ def _icm(cand_d, cand_chi, valid, tau, sweeps=6):
 
 
 # ----------------------------------------------------------------------------- entry point
+def _check_na(na, theta_o, alpha):
+    """A microscope objective's NA (SPEC §14): a number ≥ 0 (its upper bound, the ambient's
+    index, is checked with the stack), seen along the axis (θ_o = 0) of a mirror (α None)."""
+    if na is None:
+        return
+    if np.ndim(na) != 0 or not np.isfinite(float(na)) or float(na) < 0:
+        raise ValueError(f"na must be a number ≥ 0 (the objective's numerical aperture), "
+                         f"got {na!r}")
+    if float(theta_o) != 0.0 or alpha is not None:
+        raise ValueError("na (a microscope objective) views along its axis: give theta_o=0 "
+                         "and alpha=None with it")
+
+
 def _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor, grid_step_nm,
                 chi2_warn):
     if np.ndim(theta_o) != 0:
@@ -397,7 +421,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
               model_floor: float | None = None, grid_step_nm: float = 1.0,
               screen_step_nm: float = 4.0, steps: int = 6,
               chi2_warn: float = 4.0, chunk: int = 4096, progress: bool = False,
-              illumination: str = "uniform") -> PhotoResult:
+              illumination: str = "uniform", na=None) -> PhotoResult:
     """Fit the thickness map of a photograph of a film (module docstring; SPEC §13).
 
     Args:
@@ -415,6 +439,10 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
             thickness nm); gains (and C for camera="unknown") come from them.
         theta_o: the view angle (radians) of the whole photograph; alpha: GGX roughness of a
             rough film under uniform light (None: a mirror view of a uniform light).
+        na: a microscope image (SPEC §14): the numerical aperture of the Köhler-illuminated
+            objective (≤ the ambient's index), the reflectance averaged uniformly over its
+            pupil (`objective_reflectance`); θ_o = 0 and α = None with it. A flake's layer
+            count is its thickness over the monolayer's (`MONOLAYER_NM`).
         thickness_range: (lo, hi) nm, the screen's range; layer: which layer is unknown.
         smoothness_nm: τ of the neighbour prior that chooses fringe orders (None: per pixel).
         mask: (H, W) bool or a mask image: pixels to fit (default all unclipped pixels).
@@ -449,6 +477,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     report_floor = model_floor if report_floor is None else report_floor
     lo, hi = _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor,
                          grid_step_nm, chi2_warn)
+    _check_na(na, theta_o, alpha)
     if illumination not in ILLUMINATIONS:
         raise ValueError(f"illumination must be one of {ILLUMINATIONS}, got {illumination!r}")
     cam = camera_response(camera, illuminant)
@@ -479,7 +508,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     step = (hi - lo) / (g_n - 1)
     every = max(1, int(round(screen_step_nm / step)))
     coarse = np.unique(np.r_[np.arange(0, g_n, every), g_n - 1])
-    cos, qw = _geometry(float(theta_o), alpha)
+    cos, qw = _geometry(float(theta_o), alpha, na, stack, layer, cam.wavelengths, hi)
     geom = (stack, layer, jnp.asarray(cos), jnp.asarray(qw))
 
     def table_of(camera_: Camera):

@@ -280,11 +280,40 @@ def _nodes(stack: Stack, wavelength, na, nodes: int):
     return c, jnp.asarray(w, rdt), lam[..., None]
 
 
+def cone_nodes(stack: Stack, wavelength, na, thickness_max=None):
+    """(cos θ at the nodes (n,), normalised weights (n,)) of the objective's cone for callers
+    that average a reflectance themselves (`fit.photo` tables): R̄ = Σ weight_i R(cos θ_i),
+    the rule of `objective_reflectance` with its automatic node count, for a stack whose
+    ambient index is a number (the nodes then do not depend on λ). `thickness_max` (nm, per
+    layer or one number) replaces the stack's thicknesses in the node count (a fit's box),
+    `wavelength` the concrete wavelengths it must hold at (the shortest sets the count)."""
+    if is_index_model(stack.eta_outer) or np.ndim(stack.eta_outer) != 0:
+        raise ValueError("na needs an ambient (eta_outer) that is one real number: the cone's "
+                         "angles would differ per wavelength")
+    eta1 = float(np.real(stack.eta_outer))
+    na = float(na)
+    if not (np.isfinite(na) and 0.0 <= na <= eta1):
+        raise ValueError(f"na must lie in [0, η₁ = {eta1:g}] (the ambient's index), got {na}")
+    if thickness_max is not None:
+        d = np.broadcast_to(np.asarray(thickness_max, float),
+                            np.shape(np.asarray(stack.thickness)))
+        stack = stack._replace(thickness=d)
+    lam = np.asarray(wavelength, float).ravel()
+    n = auto_nodes(phase_change(stack, lam, na), branch_rho(stack, lam, na))
+    s2 = (na / eta1) ** 2
+    c_min = np.sqrt(max(1.0 - s2, 0.0))
+    tau, w = _legendre(n)
+    c = 1.0 - s2 / (1.0 + c_min) * tau
+    wc = w * c
+    return c, wc / wc.sum()
+
+
 def _average(r, c, w):
     """Σ w_i c_i R_i / Σ w_i c_i over the trailing node axis."""
     wc = w * c
     return jnp.sum(wc * r, axis=-1) / jnp.sum(wc, axis=-1)
 
 
-__all__ = ["DEFAULT_NODES", "MAX_NODES", "auto_nodes", "branch_rho", "objective_reflectance",
+__all__ = ["DEFAULT_NODES", "MAX_NODES", "auto_nodes", "branch_rho", "cone_nodes",
+           "objective_reflectance",
            "objective_reflectance_traced", "phase_change"]

@@ -110,4 +110,8 @@ from .spectral.spectra import OBSERVERS as OBSERVERS
 from .spectral.spectra import get_observer as get_observer
 from .spectral.spectra import sensitivity_ft as sensitivity_ft
 
+# raw spectrometer spectra (SPEC §14): fit_spectrum(..., envelope=k) and its reader
+from .fit.raw_spectrum import Envelope as Envelope
+from .fit.spectrum_file import read_spectrum as read_spectrum
+
 __version__ = "0.2.0"

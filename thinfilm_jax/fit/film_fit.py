@@ -131,6 +131,7 @@ from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 from . import params as P
 from .engine import covariance, from_box, to_box
 from .multistart import grid_starts, order_moves, solve_multistart
+from .raw_spectrum import fit_raw, raw_starts
 from .options import (
     _PATCH_ONLY,
     BATCHING,
@@ -669,8 +670,6 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
     spec, x_free0 = _make_spec(free, dict(o.bounds or ()), initial, None, table)
     n_starts = o.n_starts
     if envelope is not None:
-        from .raw_spectrum import raw_starts  # (raw_spectrum imports this module)
-
         n_starts = raw_starts(spec, initial, wavelength, cos_theta, n_starts)
     n_starts = _default_starts(n_starts, "spectrum", spec)
     y_starts, x_starts, grid = grid_starts(spec, x_free0, n_starts, o.n_eta_starts,
@@ -683,8 +682,6 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
                    float(np.mean(wavelength)) if V.is_concrete(wavelength) else 550.0)
     box = tuple(jnp.asarray(b, dtype) for b in box)
     if envelope is not None:
-        from .raw_spectrum import fit_raw
-
         if background is not None:
             background = V.check_finite("background", V.as_array("background", background))
             try:
@@ -694,7 +691,7 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
                                  f"broadcast to the observations {shape}") from None
         return fit_raw(observed.astype(dtype), w, wavelength.astype(dtype),
                        cos_theta.astype(dtype), base, y_starts, x_starts, box, cfg, free,
-                       envelope, sigma is not None, background)
+                       envelope, sigma is not None, background, spectrum_model, _finish)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
         out = _fit_spectrum_jit(observed.astype(dtype), w, wavelength.astype(dtype),
                                 cos_theta.astype(dtype), base, y_starts, box, cfg)

@@ -71,7 +71,7 @@ Example (a 300 nm film under a sloping lamp with an offset; the envelope is foun
     >>> lam = np.linspace(450.0, 800.0, 200)
     >>> lamp = 2.0 + 3.0 * (lam - 450.0) / 350.0
     >>> raw = lamp * airy_reflectance(Film(300.0, 1.33, 1.0), 1.0, lam) + 0.05
-    >>> from thinfilm_jax.fit.film_fit import fit_spectrum
+    >>> from thinfilm_jax import fit_spectrum
     >>> res = fit_spectrum(raw, lam, 1.0, initial=Film(500.0, 1.33, 1.0), envelope=1,
     ...                    sigma=1e-3)
     >>> round(float(res.film.thickness), 3), res.envelope.degree
@@ -91,9 +91,9 @@ import numpy as np
 import optimistix as optx
 from jax import Array
 
+from ..core import _validate as V
 from ..core.stack import Stack
 from ..optics.index import index_at
-from .film_fit import _finish, spectrum_model
 from .multistart import order_moves, solve_multistart
 from .options import DEFAULT_N_STARTS, FitResult, MisfitWarning, misfit_warnings, reduced_chi2
 
@@ -257,8 +257,9 @@ def raw_starts(spec, material, wavelength, cos_theta, n_starts) -> int:
     Δd = λ_min / (16 n cos θ₂), n the layer's Re index at λ_min (its initial value) and
     cos θ₂ the smallest over the angles (Snell). Several free layers: the product-grid
     default of the absolute fit."""
-    if n_starts is not None or len(spec.thick) != 1:
-        return n_starts
+    if n_starts is not None or len(spec.thick) != 1 or not (
+            V.is_concrete(wavelength) and V.is_concrete(cos_theta)):
+        return n_starts  # (traced wavelengths: the absolute fit's default)
     k, layer = spec.thick[0]
     lam_min = float(np.min(np.asarray(wavelength)))
     n = _real_index(material.eta[layer] if isinstance(material, Stack) else material.eta_film,
@@ -276,12 +277,13 @@ def _real_index(eta, lam):
     return float(np.real(np.asarray(index_at(eta, lam))))
 
 
-@functools.partial(jax.jit, static_argnames=("cfg", "offset"))
-def _fit_raw_jit(observed, w, wavelength, cos_theta, base, y_starts, box, basis, cfg, offset):
+@functools.partial(jax.jit, static_argnames=("cfg", "offset", "model", "finish"))
+def _fit_raw_jit(observed, w, wavelength, cos_theta, base, y_starts, box, basis, cfg, offset,
+                 model, finish):
     spec = cfg.spec._replace(lo=box[0], hi=box[1])
 
     def res_film(film, obs, ww):
-        refl = spectrum_model(film, cos_theta, wavelength)
+        refl = model(film, cos_theta, wavelength)
         return project(refl, obs, ww, basis, offset)[0].reshape(-1)
 
     def res(y, args):
@@ -293,20 +295,22 @@ def _fit_raw_jit(observed, w, wavelength, cos_theta, base, y_starts, box, basis,
     args = (observed, w)
     orders, distinct = order_moves(spec, base, cos_theta, cfg.wavelength, cfg.n_orders)
     out = solve_multistart(res, res, y_starts, args, cfg, orders, distinct)
-    fin = _finish(out, res_x, spec, base, args, w, cfg)
+    fin = finish(out, res_x, spec, base, args, w, cfg)
     film = fin[1][0]
-    refl = jax.lax.stop_gradient(spectrum_model(film, cos_theta, wavelength))
+    refl = jax.lax.stop_gradient(model(film, cos_theta, wavelength))
     _, u = project(refl, jax.lax.stop_gradient(observed), jax.lax.stop_gradient(w), basis,
                    offset)
     return fin, u
 
 
 def fit_raw(observed, w, wavelength, cos_theta, base, y_starts, x_starts, box, cfg, free,
-            degree, sigma_given, background=None):
+            degree, sigma_given, background, model, finish):
     """The raw-spectrum fit behind `fit_spectrum(..., envelope=degree)`: one search with the
     weights `w`, or (σ not given) two (module docstring); `background` (n_angles, n_wl), a
-    known b(λ) (a dark or no-film spectrum), subtracted, b not fitted. Returns the
-    `FitResult`."""
+    known b(λ) (a dark or no-film spectrum), subtracted, b not fitted, or None. `model`
+    (`film_fit.spectrum_model`) and `finish` (`film_fit._finish`: the fitted values, errors
+    and runner-ups) are `fit_spectrum`'s own, passed in (`film_fit` imports this module).
+    Returns the `FitResult`."""
     basis, center, half = envelope_basis(wavelength, degree)
     basis = jnp.asarray(basis, observed.dtype)
     offset = background is None
@@ -315,7 +319,7 @@ def fit_raw(observed, w, wavelength, cos_theta, base, y_starts, x_starts, box, c
 
     def run(weights):
         return _fit_raw_jit(observed, weights, wavelength, cos_theta, base, y_starts, box,
-                            basis, cfg, offset)
+                            basis, cfg, offset, model, finish)
 
     with jax.default_matmul_precision("highest"):
         out, u = run(w)

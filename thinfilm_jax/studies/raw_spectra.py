@@ -285,7 +285,7 @@ KNOWN_TO_FAIL = (
     "drown in noise. What a model fit needs for them: (1) the instrument's lamp shape, from "
     "a reference (a mirror, or the set reference of a time series as here) or from the "
     "`void`/dark spectrum as `background=`; a zeroth-order film has one maximum as broad as "
-    "the band, so the gain must be fixed to a low degree (k = 0) or known, else it trades "
+    "the band, so the gain must be of low degree (k ≤ 1, chosen by Δχ²) or known, else it trades "
     "with the thickness (victor2's flat-lamp column); (2) the band cut where the "
     "instrument's structure is not smooth (below 450 nm here); (3) the index the labels "
     "used, dispersive where given; (4) a thickness box wide enough and a screen dense "

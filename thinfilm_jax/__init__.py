@@ -122,4 +122,8 @@ from .optics.effective_medium import EffectiveMedium as EffectiveMedium
 from .optics.objective import objective_reflectance as objective_reflectance
 from .optics.materials import MONOLAYER_NM as MONOLAYER_NM
 
+# raw spectrometer spectra (SPEC §14): fit_spectrum(..., envelope=k) and its reader
+from .fit.raw_spectrum import Envelope as Envelope
+from .fit.spectrum_file import read_spectrum as read_spectrum
+
 __version__ = "0.2.0"

@@ -393,8 +393,9 @@ def test_cli_spectrum_csv_and_json(tmp_path, spectra):
     ("# initial = {\"eta_film\": 1.3, \"eta_base\": 2.0}\n"
      "theta_deg,wavelength_nm,R\n0,400,0.1\n0,500,0.1\n30,400,0.1\n",
      r"every angle needs the same wavelength_nm"),
+    # no angle: normal incidence (SPEC §14); one wavelength cannot determine the film
     ("# initial = {\"eta_film\": 1.3, \"eta_base\": 2.0}\nwavelength_nm,R\n400,0.1\n",
-     r"missing column 'theta_deg'"),
+     r"1 observations cannot determine"),
 ])
 def test_cli_bad_files(tmp_path, text, match):
     src = tmp_path / "bad.csv"
@@ -407,8 +408,11 @@ def test_cli_bad_files(tmp_path, text, match):
 def test_cli_bad_paths(tmp_path):
     with pytest.raises(SystemExit, match="no such file"):
         cli_main(["fit", str(tmp_path / "missing.csv")])
-    (tmp_path / "x.txt").write_text("1")
-    with pytest.raises(SystemExit, match="expected .csv or .json"):
+    (tmp_path / "x.bmp").write_text("1")
+    with pytest.raises(SystemExit, match="expected .csv, .json or a spectrometer export"):
+        cli_main(["fit", str(tmp_path / "x.bmp")])
+    (tmp_path / "x.txt").write_text("1")  # a spectrometer export (SPEC §14) without pairs
+    with pytest.raises(SystemExit, match="no 'wavelength value' pairs"):
         cli_main(["fit", str(tmp_path / "x.txt")])
     (tmp_path / "x.json").write_text("{not json")
     with pytest.raises(SystemExit, match="not valid JSON"):

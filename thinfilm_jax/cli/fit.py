@@ -20,9 +20,20 @@ angles of incidence.
 
 * CSV: columns ``wavelength_nm,R`` and, for several angles, ``theta_deg`` (long format:
   one row per (angle, wavelength); every angle must have the same wavelengths); a single
-  angle may instead be given as the setting ``theta_deg = 0``.
+  angle may instead be given as the setting ``theta_deg = 0``; with neither, normal
+  incidence (0°, what most reflectometers measure) is assumed and said so.
 * JSON: ``{"wavelength_nm": [...], "theta_deg": [...], "R": [[...], ...]}`` (R has one
   row per angle); optional ``"sigma"``.
+
+**Raw spectrometer spectra** (SPEC §14; ``fit_spectrum(..., envelope=k)``): a text export of
+a spectrometer, ``.xy``, ``.txt``, ``.dat`` or ``.tsv`` (two columns, or an OceanView /
+SpectraSuite export: `thinfilm_jax.fit.spectrum_file.read_spectrum`; rows with NaN are
+dropped), fitted at normal incidence as g(λ)·R(λ) + b(λ) with ``--envelope K`` (default 2
+for these files; also the setting ``envelope`` of a CSV / JSON spectrum). The material
+comes from the command line (``--eta-film 1.33 --eta-base 1`` for a soap film in air),
+``--wavelength-range LO HI`` keeps part of the band, ``--thickness-range LO HI`` sets the
+thickness box (default 0–2000 nm) and ``--background FILE`` subtracts a known offset (a dark
+or no-film spectrum on the same wavelengths; then only g is fitted).
 
 **Settings** (JSON keys, or CSV comment lines ``# key = value`` above the header, the
 value JSON or a bare word / comma list; a ``# key = value`` line below the header is an
@@ -104,7 +115,13 @@ materials: an index is a number, a bundled name (SiO2, Si, Si3N4, ...) or a .yml
 
 SETTINGS = ("alpha", "initial", "free", "method", "refine_method", "observer", "bounds",
             "solver", "n_starts", "n_solves", "max_steps", "quadrature", "absolute_sigma",
-            "theta_deg", "sigma", "kind", "layers")
+            "theta_deg", "sigma", "kind", "layers", "envelope")
+#: suffixes of spectrometer text exports (`read_spectrum`), fitted as raw spectra
+RAW_SUFFIXES = (".xy", ".txt", ".dat", ".tsv")
+#: envelope degree of a raw spectrum file when --envelope is not given
+RAW_DEFAULT_ENVELOPE = 2
+#: what `read_csv` / `read_raw` note for the run to print (not a setting)
+NOTES = "_notes"
 INITIAL_KEYS = ("thickness", "eta_film", "eta_base", "kappa_base", "eta_outer")
 INDEX_KEYS = ("eta_film", "eta_base", "eta_outer")
 INITIAL_DEFAULTS = {"thickness": 500.0, "kappa_base": 0.0, "eta_outer": 1.0}
@@ -205,9 +222,11 @@ def read_csv(path: Path) -> dict:
         sig = column("sigma") if "sigma" in header else None
         if "theta_deg" in header:
             theta = column("theta_deg")
+        elif "theta_deg" not in settings:  # what most reflectometers measure
+            theta = [0.0] * len(lam)
+            obs[NOTES] = ["no theta_deg column or setting: normal incidence (theta_deg = 0) "
+                          "assumed"]
         else:
-            if "theta_deg" not in settings:
-                _fail(path, "missing column 'theta_deg' (or setting '# theta_deg = ...')")
             t = settings["theta_deg"]
             if isinstance(t, list):
                 _fail(path, "setting theta_deg must be one angle when the CSV has no "
@@ -286,7 +305,25 @@ def read_observations(path) -> dict:
         return read_csv(path)
     if suffix == ".json":
         return read_json(path)
-    _fail(path, f"unknown file type {suffix!r}; expected .csv or .json")
+    if suffix in RAW_SUFFIXES:
+        return read_raw(path)
+    _fail(path, f"unknown file type {suffix!r}; expected .csv, .json or a spectrometer "
+                f"export ({', '.join(RAW_SUFFIXES)})")
+
+
+def read_raw(path: Path) -> dict:
+    """A spectrometer's text export (`read_spectrum`, NaN rows dropped) as a raw spectrum at
+    normal incidence, envelope `RAW_DEFAULT_ENVELOPE` (module docstring)."""
+    from ..fit.spectrum_file import read_spectrum
+
+    try:
+        lam, val = read_spectrum(path, nonfinite="drop")
+    except ValueError as e:
+        _fail(path, str(e))
+    return {"kind": "spectrum", "wavelength_nm": lam.tolist(), "theta_deg": [0.0],
+            "R": [val.tolist()], "envelope": RAW_DEFAULT_ENVELOPE,
+            NOTES: ["a spectrometer export: fitted at normal incidence (theta_deg = 0) as a raw "
+                    "signal g(λ)·R(λ) + b(λ)"]}
 
 
 # ----------------------------------------------------------------------------- checks
@@ -419,7 +456,7 @@ def material_of(desc: dict):
 
 def _settings(path, obs, kind):
     unknown = [k for k in obs if k not in SETTINGS and k not in
-               ("theta_o_deg", "observed", "wavelength_nm", "R")]
+               ("theta_o_deg", "observed", "wavelength_nm", "R", NOTES)]
     if unknown:
         _fail(path, f"unknown key(s) {unknown}; settings are {list(SETTINGS)}")
     init = obs.get("initial")
@@ -485,6 +522,14 @@ def _settings(path, obs, kind):
                         if isinstance(v, list) and len(v) == 2
                         else _fail(path, f"bounds.{k} must be [lo, hi], got {v!r}")
                         for k, v in b.items()}
+    if obs.get("envelope") is not None:
+        e = obs["envelope"]
+        if not (isinstance(e, int) and not isinstance(e, bool) and e >= 0):
+            _fail(path, f"envelope must be an integer >= 0 (the degree of the lamp "
+                        f"polynomials), got {e!r}")
+        if kind != "spectrum":
+            _fail(path, "envelope applies to spectra only")
+        kw["envelope"] = e
     if kind == "spectrum":
         for k in ("method", "refine_method", "observer"):
             if k in kw:
@@ -496,7 +541,7 @@ def _settings(path, obs, kind):
 def _call_kw(kw, options_cls):
     """Settings → keyword arguments of the fit: `free`, `method` stay keywords, the rest
     becomes its `FitOptions` (invalid values raise ValueError, reported as file errors)."""
-    call = {k: kw[k] for k in ("free", "method") if k in kw}
+    call = {k: kw[k] for k in ("free", "method", "envelope") if k in kw}
     call["options"] = options_cls(**{k: v for k, v in kw.items() if k not in call})
     return call
 
@@ -555,6 +600,18 @@ def add_arguments(parser) -> None:
     g.add_argument("--free", nargs="+", metavar="NAME",
                    help="fitted parameters, e.g. thickness eta_film, or thickness[0] "
                         "thickness[1] with --layers")
+    r = parser.add_argument_group("raw spectra (SPEC §14)")
+    r.add_argument("--envelope", type=int, metavar="K",
+                   help="fit a raw spectrometer signal g(λ)·R(λ) + b(λ), g and b polynomials "
+                        f"of degree K (default {RAW_DEFAULT_ENVELOPE} for "
+                        f"{'/'.join(RAW_SUFFIXES)} exports)")
+    r.add_argument("--wavelength-range", dest="wavelength_range", type=float, nargs=2,
+                   metavar=("LO", "HI"), help="fit only LO <= λ <= HI (nm)")
+    r.add_argument("--thickness-range", dest="thickness_range", type=float, nargs=2,
+                   metavar=("LO", "HI"), help="the thickness box (nm) the fit searches")
+    r.add_argument("--background", metavar="FILE",
+                   help="a known offset (dark or no-film spectrum) on the same wavelengths, "
+                        "subtracted; then only the gain g is fitted")
     parser.set_defaults(usage_error=parser.error)
 
 
@@ -606,6 +663,20 @@ def _overrides(args, obs) -> None:
     free = getattr(args, "free", None)
     if free is not None:
         obs["free"] = list(free)
+    env = getattr(args, "envelope", None)
+    if env is not None:
+        if env < 0:
+            usage(f"argument --envelope: must be >= 0, got {env}")
+        obs["envelope"] = env
+    tr = getattr(args, "thickness_range", None)
+    if tr is not None:
+        if not (math.isfinite(tr[0]) and math.isfinite(tr[1]) and 0 <= tr[0] < tr[1]):
+            usage(f"argument --thickness-range: need 0 <= LO < HI, got {tr[0]} {tr[1]}")
+        obs["bounds"] = {**(obs.get("bounds") or {}), "thickness": [tr[0], tr[1]]}
+    wr = getattr(args, "wavelength_range", None)
+    if wr is not None and not (math.isfinite(wr[0]) and math.isfinite(wr[1])
+                               and 0 < wr[0] < wr[1]):
+        usage(f"argument --wavelength-range: need 0 < LO < HI, got {wr[0]} {wr[1]}")
 
 
 def run_fit_cli(args) -> int:
@@ -622,6 +693,8 @@ def run_fit_cli(args) -> int:
     if kind not in ("patch", "spectrum"):
         _fail(path, f"kind must be 'patch' or 'spectrum', got {kind!r}")
     film_kw, kw = _settings(path, obs, kind)
+    for note in obs.get(NOTES, ()):
+        print(f"{path.name}: {note}")
 
     from ..core._io import write_json
     from ..fit.film_fit import FitOptions, fit_film, fit_spectrum
@@ -665,15 +738,41 @@ def run_fit_cli(args) -> int:
                 _fail(path, f"wavelength_nm = {lam[lam <= 0][0]!r} must be > 0 (nm)")
             theta = _array(path, "theta_deg", obs.get("theta_deg", [0.0]), 1)
             _in_range(path, "theta_deg", theta, 0.0, 90.0, " degrees")
-            refl = _array(path, "R", obs["R"], (1, 2))
+            refl = np.atleast_2d(_array(path, "R", obs["R"], (1, 2)))
+            background = None
+            if getattr(args, "background", None):
+                if "envelope" not in kw:
+                    _fail(path, "--background applies to raw spectra (give --envelope K)")
+                from ..fit.spectrum_file import read_spectrum
+
+                lam_b, background = read_spectrum(Path(args.background), nonfinite="drop")
+                if not np.array_equal(lam_b, lam):
+                    lam_b = lam_b.tolist()
+                    _fail(path, f"--background {args.background}: its wavelengths differ from "
+                                f"the spectrum's ({len(lam_b)} vs {lam.size} points)")
+            wr = getattr(args, "wavelength_range", None)
+            if wr is not None:
+                keep = (lam >= wr[0]) & (lam <= wr[1])
+                if keep.sum() < 2:
+                    _fail(path, f"--wavelength-range {wr[0]:g} {wr[1]:g} keeps "
+                                f"{int(keep.sum())} wavelengths")
+                lam, refl = lam[keep], refl[:, keep]
+                sigma = (sigma[..., keep] if isinstance(sigma, np.ndarray)
+                         and sigma.shape[-1] == keep.size else sigma)
+                background = None if background is None else background[keep]
+            call = _call_kw(kw, FitOptions)
+            if background is not None:
+                call["background"] = background
             res = fit_spectrum(refl, lam, np.cos(np.deg2rad(theta)), initial=initial,
-                               sigma=sigma, **_call_kw(kw, FitOptions))
+                               sigma=sigma, **call)
             data = {"wavelength_nm": lam.tolist(), "theta_deg": theta.tolist(),
                     "R": np.atleast_2d(refl).tolist()}
     except (ValueError, TypeError) as e:
         _fail(path, str(e))
     summary = res.to_dict()
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in kw.items()}
+    if getattr(args, "background", None):
+        settings["background"] = str(args.background)
     write_json(out, {"input": str(path), "kind": kind, "initial": film_kw,
                      "settings": settings, "data": data, "result": summary})
     p = summary["params"]

@@ -131,6 +131,7 @@ from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 from . import params as P
 from .engine import covariance, from_box, to_box
 from .multistart import grid_starts, order_moves, solve_multistart
+from .raw_spectrum import fit_raw, raw_starts
 from .options import (
     _PATCH_ONLY,
     BATCHING,
@@ -585,9 +586,9 @@ class _SpecCfg(NamedTuple):
 
 
 def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
-                 free: Sequence[str] = ("thickness",), sigma=None,
-                 options: FitOptions | None = None) -> FitResult:
-    """Fit film parameters to reflectance spectra R(θ₁, λ) (SPEC §2, §12; film metrology).
+                 free: Sequence[str] = ("thickness",), sigma=None, envelope: int | None = None,
+                 background=None, options: FitOptions | None = None) -> FitResult:
+    """Fit film parameters to reflectance spectra R(θ₁, λ) (SPEC §2, §12, §14; film metrology).
 
     The model is `spectrum_model`: the exact Airy reflectance (general Fresnel path) of a
     constant `Film`, the stack code (every index at each λ) of a `Stack` or a dispersive
@@ -609,14 +610,28 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
         free: names of the fitted scalars (`params` module): `Film` fields, a `Stack`'s
             ``"thickness[i]"`` (``"thickness"`` is layer 0), an index model's
             ``"eta[0].coefficients[0]"``, ...
-        sigma: standard deviations of the observations (broadcast to `observed`).
+        sigma: standard deviations of the observations (broadcast to `observed`). With
+            `envelope` and ``sigma=None``, σ(λ) is estimated from the data (two passes:
+            `raw_spectrum` module docstring).
+        envelope: None (default): `observed` is absolute reflectance. An int k ≥ 0:
+            `observed` is a raw spectrometer signal g(λ)·R(λ) + b(λ), g and b polynomials
+            of degree k in λ per spectrum (lamp × detector; stray light and dark),
+            eliminated exactly at every trial of the film parameters by variable projection
+            (`thinfilm_jax.fit.raw_spectrum`): the search and the standard errors are over
+            the film parameters alone, with ν = n − p − 2(k + 1)·n_angles degrees of
+            freedom, and the screen's thickness spacing resolves the bluest fringes
+            (`raw_spectrum.raw_starts`). `FitResult.envelope` holds g and b.
+        background: with `envelope` only: a known offset b(λ) (a dark spectrum, or the
+            signal with no film in the beam), broadcast to `observed`; it is subtracted and
+            only g is fitted ((k + 1) linear parameters per spectrum).
         options: `FitOptions` (search and solver fields; the patch-model fields must keep
             their defaults). ``n_starts=None`` screens 256 thicknesses (one free layer) or
             a 48 × 48 grid (two free layers; `DEFAULT_N_STARTS_LAYERS` per layer): spectral
             minima are closer together than patch-colour minima, and the model is cheap.
 
     Returns:
-        `FitResult` with ``alpha=None``; residuals of shape (n_angles, n_wl).
+        `FitResult` with ``alpha=None``; residuals of shape (n_angles, n_wl) (with
+        `envelope`: g R + b − observed).
 
     Example:
         >>> import numpy as np
@@ -633,6 +648,10 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
                         f"{type(initial).__name__}")
     o = _check_options(options, "spectrum")
     batching = _check_batching(o.batching)
+    if envelope is not None:
+        envelope = V.check_int("envelope", envelope, 0)
+    elif background is not None:
+        raise ValueError("background applies to raw spectra only: give envelope=k too")
     wavelength = jnp.asarray(V.as_array("wavelength", wavelength))
     cos_theta = jnp.atleast_1d(jnp.asarray(V.as_array("cos_theta", cos_theta)))
     if wavelength.ndim != 1 or cos_theta.ndim != 1:
@@ -651,13 +670,20 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
         raise ValueError(f"observed must have shape (n_angles, n_wl) = {shape} to match "
                          f"cos_theta and wavelength; got {observed.shape}")
     V.check_finite("observed", observed)
-    if observed.size <= len(free):
+    n_lin = 0 if envelope is None else (1 if background is not None else 2) * (
+        envelope + 1) * shape[0]
+    if observed.size <= len(free) + n_lin:
         raise ValueError(f"{observed.size} observations cannot determine {len(free)} free "
-                         f"parameters {free}")
+                         f"parameters {free}" + ("" if envelope is None else
+                                                 f" and {n_lin} envelope coefficients "
+                                                 f"(envelope={envelope})"))
     dtype = _real_dtype(observed, wavelength, cos_theta, *jax.tree_util.tree_leaves(initial))
     base = P.leaves(initial, None, dtype)
     spec, x_free0 = _make_spec(free, dict(o.bounds or ()), initial, None, table)
-    n_starts = _default_starts(o.n_starts, "spectrum", spec)
+    n_starts = o.n_starts
+    if envelope is not None:
+        n_starts = raw_starts(spec, initial, wavelength, cos_theta, n_starts)
+    n_starts = _default_starts(n_starts, "spectrum", spec)
     y_starts, x_starts, grid = grid_starts(spec, x_free0, n_starts, o.n_eta_starts,
                                             o.starts, dtype)
     w = _weights(sigma, shape, dtype)
@@ -667,6 +693,17 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
                    o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
                    float(np.mean(wavelength)) if V.is_concrete(wavelength) else 550.0)
     box = tuple(jnp.asarray(b, dtype) for b in box)
+    if envelope is not None:
+        if background is not None:
+            background = V.check_finite("background", V.as_array("background", background))
+            try:
+                background = jnp.broadcast_to(jnp.asarray(background, dtype), shape)
+            except ValueError:
+                raise ValueError(f"background of shape {np.shape(background)} does not "
+                                 f"broadcast to the observations {shape}") from None
+        return fit_raw(observed.astype(dtype), w, wavelength.astype(dtype),
+                       cos_theta.astype(dtype), base, y_starts, x_starts, box, cfg, free,
+                       envelope, sigma is not None, background, spectrum_model, _finish)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
         out = _fit_spectrum_jit(observed.astype(dtype), w, wavelength.astype(dtype),
                                 cos_theta.astype(dtype), base, y_starts, box, cfg)

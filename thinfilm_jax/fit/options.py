@@ -309,6 +309,8 @@ class FitResult(NamedTuple):
         warnings: messages about the fit: the misfit test (module docstring), when the
             reduced χ² exceeds the 99.9 % point of χ²_ν/ν (the fits also `warnings.warn`
             it as a `MisfitWarning`); empty under `jax.jit` (no concrete values).
+        envelope: the fitted lamp envelope g(λ), b(λ) of a raw-spectrum fit
+            (``fit_spectrum(..., envelope=k)``: `raw_spectrum.Envelope`); None otherwise.
     """
 
     film: Film | Stack
@@ -328,6 +330,7 @@ class FitResult(NamedTuple):
     runner_up_dchi2: Array
     reduced_chi2: Array = math.nan
     warnings: tuple = ()
+    envelope: object = None
 
     @property
     def ambiguous(self) -> bool:
@@ -358,13 +361,16 @@ class FitResult(NamedTuple):
         ``absolute_sigma=True`` when the fit used ``FitOptions(absolute_sigma=True)`` (σ
         known): then q is the normal quantile. Measured calibration (1 % noise, 200 films):
         README "The global minimum and honest error bars", `studies.coverage`.
-        Local to this minimum: see `ambiguous` for other fringe orders.
+        Local to this minimum: see `ambiguous` for other fringe orders. A raw-spectrum fit
+        (`envelope`) also counts its eliminated linear parameters: n − p − 2(k + 1) per
+        spectrum.
         """
         from scipy.stats import norm, t
 
         if not 0.0 < float(level) < 1.0:
             raise ValueError(f"level must be in (0, 1), got {level!r}")
-        dof = int(np.asarray(self.residuals).size) - len(self.free)
+        dof = int(np.asarray(self.residuals).size) - len(self.free) - (
+            0 if self.envelope is None else self.envelope.n_linear)
         q = norm.ppf(0.5 + level / 2) if absolute_sigma or dof < 1 else t.ppf(0.5 + level / 2,
                                                                                dof)
         return {k: (float(v) - q * float(self.stderr[k]), float(v) + q * float(self.stderr[k]))
@@ -415,6 +421,7 @@ class FitResult(NamedTuple):
             "ambiguous": self.ambiguous,
             "reduced_chi2": f(self.reduced_chi2),
             "warnings": list(self.warnings),
+            **({} if self.envelope is None else {"envelope": self.envelope.to_dict()}),
         }
 
 

@@ -58,7 +58,6 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -80,7 +79,7 @@ from .film_fit import (
     _n_candidates,
     _real_dtype,
     _result,
-    _Spec,
+    _SpecCfg,
     _static,
 )
 from .multistart import grid_starts, order_moves, solve_multistart
@@ -94,22 +93,6 @@ def ellipsometry_model(material, cos_theta, wavelength):
     measured points (cos θ_i, λ_i) (n,): the fit's forward model (no validation)."""
     psi, delta = psi_delta_traced(material, cos_theta, wavelength, fold=True)
     return jnp.stack([psi, delta])
-
-
-class _EllipsCfg(NamedTuple):
-    spec: _Spec
-    solver: str
-    rtol: float
-    atol: float
-    grid: tuple
-    n_solves: int
-    start_steps: int
-    max_steps: int
-    absolute_sigma: bool
-    batching: str
-    n_orders: int
-    n_alternatives: int
-    wavelength: float
 
 
 def _points(psi, delta, wavelength, angle_deg):
@@ -216,7 +199,7 @@ def fit_ellipsometry(psi, delta, wavelength, angle_deg, *, initial: Film | Stack
                                            dtype)
     w = _sigma_weights(sigma_psi, sigma_delta, psi, dtype)
     static, box = _static(spec)
-    cfg = _EllipsCfg(static, o.solver, o.rtol, o.atol, grid,
+    cfg = _SpecCfg(static, o.solver, o.rtol, o.atol, grid,
                      _n_candidates(y_starts, grid, o.n_solves), o.start_steps, o.max_steps,
                      o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
                      float(np.mean(np.asarray(wavelength))) if concrete else 550.0)
@@ -229,7 +212,7 @@ def fit_ellipsometry(psi, delta, wavelength, angle_deg, *, initial: Film | Stack
 
 @functools.partial(jax.jit, static_argnames="cfg")
 def _fit_ellipsometry_jit(observed, w, wavelength, cos_theta, base, y_starts, box,
-                          cfg: _EllipsCfg):
+                          cfg: _SpecCfg):
     spec = cfg.spec._replace(lo=box[0], hi=box[1])
 
     def res_x(x_free, args):

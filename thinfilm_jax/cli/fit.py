@@ -347,7 +347,7 @@ def _in_range(path, name, a, lo, hi, unit=""):
 
     bad = (a < lo) | (a > hi)
     if np.any(bad):
-        _fail(path, f"{name} = {a[bad].flat[0]!r} lies outside [{lo}, {hi}]{unit}")
+        _fail(path, f"{name} = {float(a[bad].flat[0])!r} lies outside [{lo}, {hi}]{unit}")
 
 
 def parse_index(source):

@@ -43,6 +43,14 @@ def estimate_noise(image, valid) -> float:
     the signal adds to r, so σ̂ errs high on a noise-free image: a noise floor the model
     must reach. Falls back to 1e-3 of the image's median where too few pixels have four
     fitted neighbours (< 8) or the image is constant.
+
+    Example (a linear image with noise of level 0.01):
+        >>> import numpy as np
+        >>> y, x = np.mgrid[0:40, 0:40] / 40
+        >>> noise = np.random.default_rng(0).normal(0.0, 0.01, (40, 40, 3))
+        >>> img = np.stack([x, y, x + y], -1) + noise
+        >>> round(estimate_noise(img, np.ones((40, 40), bool)), 2)
+        0.01
     """
     img = np.asarray(image, float)
     nb, ok = neighbours(np.zeros(valid.shape), valid)
@@ -50,13 +58,13 @@ def estimate_noise(image, valid) -> float:
     scale = float(np.median(np.abs(img[valid]))) if np.any(valid) else 1.0
     floor = 1e-3 * scale if scale > 0 else 1e-6
     if np.sum(inner) < 8:
-        return floor
+        return float(floor)
     p = np.pad(img, ((1, 1), (1, 1), (0, 0)), mode="edge")
     mean_nb = 0.25 * (p[:-2, 1:-1] + p[2:, 1:-1] + p[1:-1, :-2] + p[1:-1, 2:])
     r = (img - mean_nb)[inner].ravel()
     mad = float(np.median(np.abs(r - np.median(r))))
     sig = 1.4826 * mad / np.sqrt(1.25)
-    return sig if sig > 1e-9 * max(scale, 1e-30) else floor
+    return float(sig) if sig > 1e-9 * max(scale, 1e-30) else float(floor)
 
 
 def order_flags(e_d, d_grid, d, loss, valid, box, n_bands, p):

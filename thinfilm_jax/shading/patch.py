@@ -212,6 +212,8 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
     bin means c̄_k (improved, averaged over the bins).
     """
     o = options
+    if o.shat == "auto":  # uniform light's default Ŝ source (`ModelOptions`), as patch_radiance
+        o = o._replace(shat="exact")
     quad = patch_quadrature(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
     if method == "khr":  # as `ideal`; its d = 0 is its own formula, not the bare base
         rgb = jnp.sum(quad.weight) * khr_bands(film, jnp.cos(theta_o))  # linear Rec. 709

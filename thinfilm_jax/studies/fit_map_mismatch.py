@@ -73,6 +73,15 @@ def run(resolution: int = 24) -> dict:
 
 
 def report(rows: dict) -> str:
+    """The study's Markdown table from `run`'s rows.
+
+    Example:
+        >>> row = {"sigma": 7.7e-4, "reduced_chi2": 149.0, "within_5nm": 0.891,
+        ...        "within_15nm": 0.951, "wrong": 0.049, "wrong_flagged": 1.0,
+        ...        "right_flagged": 0.331, "at_bound": 0.0, "warned": True, "seconds": 1.0}
+        >>> print(report({"pixels": 448, "filtered": row, "improved": row}).splitlines()[-1])
+        | improved | 0.00077 | 149 | 89.1% | 95.1% | 4.9% | 100.0% | 33.1% | True |
+    """
     lines = [f"# Map fits against an exact rendering ({rows['pixels']} px sphere, {MAP}, "
              f"α = {ALPHA}, d = {THICKNESS_NM:g} nm, η₂ = {ETA_FILM})", "",
              "| model | σ estimated | χ²ᵣ | within 5 nm | within 15 nm | wrong | wrong flagged "

@@ -161,10 +161,7 @@ def _srgb_image(img, cam):
 
 
 def plot(result, path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from . import _plot as plt  # no pyplot state, no backend switch
 
     cam = camera_response(CAMERA, LAMP)
     fig = plt.figure(figsize=(13, 7.8))

@@ -27,6 +27,8 @@ NO_EXAMPLES = {
                                   "tests/studies/test_bench_smoke.py)",
     "thinfilm_jax.studies.stack_bench": "a benchmark script against installed peers (tmm, "
                                         "tmm_fast, tmmax in subprocesses): run as a module",
+    "thinfilm_jax.studies.presets_bench": "a timing script: one `run` of five jitted "
+                                           "`envmap_radiance` calls on 2²⁰ points (minutes)",
     "thinfilm_jax.studies.scaling": "the device-scaling driver: it spawns one subprocess per "
                                     "device count and times the large jobs (minutes)",
     "thinfilm_jax.studies.coverage": "a seeded study script: its functions are undocumented "

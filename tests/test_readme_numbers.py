@@ -782,7 +782,19 @@ def _bench_load():
             artifact("bench.json")["environment"]["load_average"][0]]
 
 
+def _presets_rows():
+    r = artifact("presets_bench.json")["rows"]
+    names = {"`ideal`": "ideal", "`filtered`": "filtered",
+             '`improved`, `ModelOptions.preset("fast")` (K = 2)': "improved (fast)",
+             '`improved`, `preset("default")` (K = 3)': "improved (default)",
+             '`improved`, `preset("accurate")` (K = 3, three reads a bin)': "improved (accurate)"}
+    return {(label,): [r[k]["ns_per_point"], r[k]["x_filtered"], r[k]["first_call_s"]]
+            for label, k in names.items()}
+
+
 SPECS = [
+    Table("| method | ns a point | × `filtered` | first call (compiles) |",
+          ("presets_bench.json",), 1, _presets_rows),
     Table("| row | method | ΔE₀₀ mean |", ("figure7.json",), 2, _fig7_rows),
     Table("| render (64 px sphere) |", ("ibl_render.json",), 1, _ibl_render_rows),
     Verbatim("| method | s / frame |", ("ibl_bench.json",), _ibl_markdown),

@@ -65,8 +65,7 @@ from .ibl_reference import auto_subdivisions, exact_radiance  # noqa: F401 (re-e
 from ..optics.fresnel import safe_sqrt
 from ..realtime.improved import BinTable, bin_bands, bin_table, lookup_bins, scan_bins
 from ..realtime.kernels import filtered_kernel, ideal_kernel
-from ..spectral.colorimetry import rec709_to_band_matrix
-from ..spectral.khr import khr_bands
+from ..spectral.khr import khr_bands, khr_to_bands
 from ..spectral.lut import ShatLUT, build_shat_lut
 from ..realtime.options import ModelOptions, check_options
 from .prefilter import (PrefilteredEnvMap, bin_radiance_parts, lookup_albedo, lookup_prefiltered,
@@ -393,13 +392,7 @@ def _khr_points(film, alpha, normal, view, pref, observer):
     if pref.has_sources:  # the same Fresnel for every light, as the renderer's punctual ones
         light = light + source_light(alpha, normal, view, pref.sources)
     rgb = jnp.where(up[..., None], khr_bands(film, co) * light, 0.0)
-    return _rec709_to_bands(rgb, observer)
-
-
-def _rec709_to_bands(rgb, observer):
-    """`colorimetry.rec709_to_bands` on a JAX array (its 3×3 matrix as a constant)."""
-    m = jnp.asarray(rec709_to_band_matrix(observer), rgb.dtype)
-    return jnp.matmul(rgb, m.T, precision=HIGHEST)
+    return khr_to_bands(rgb, observer)
 
 
 def _map_points(film, alpha, normal, view, pref, cfg):

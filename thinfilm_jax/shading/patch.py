@@ -59,8 +59,7 @@ from ..brdf.microfacet import (light_moments, patch_quadrature, sample_patch_mc,
 from ..realtime.kernels import filtered_kernel, ideal_kernel
 from ..optics.opd import cos_incidence_from_projection, opd_moments_exact, project_light_moments
 from ..realtime.options import ModelOptions, check_options
-from ..spectral.colorimetry import rec709_to_band_matrix
-from ..spectral.khr import khr_bands
+from ..spectral.khr import khr_bands, khr_to_bands
 from ..spectral.reflectance import (band_centroids, bare_bands, choose_layer, per_band,
                                     spectral_bands, stack_bands)
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
@@ -217,8 +216,7 @@ def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
     quad = patch_quadrature(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
     if method == "khr":  # as `ideal`; its d = 0 is its own formula, not the bare base
         rgb = jnp.sum(quad.weight) * khr_bands(film, jnp.cos(theta_o))  # linear Rec. 709
-        m = jnp.asarray(rec709_to_band_matrix(observer), rgb.dtype)  # the bands, as every method
-        return jnp.matmul(m, rgb, precision=jax.lax.Precision.HIGHEST)
+        return khr_to_bands(rgb, observer)  # the bands, as every method
     if o.layer == "bare":
         return _bare_patch(film, theta_o, alpha, quad, method, observer, o, table)
     if method == "reference":

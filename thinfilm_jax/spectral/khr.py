@@ -84,7 +84,7 @@ from jax import Array
 from ..core import _validate as V
 from ..core.film import Film
 from ..optics.fresnel import fresnel_schlick, normal_reflectance, safe_sqrt
-from .colorimetry import CIE_1931, delta_e2000_rec709
+from .colorimetry import CIE_1931, delta_e2000_rec709, rec709_to_band_matrix
 from .colorimetry import bands_to_rec709 as bands_to_rec709  # re-exported (module docstring)
 from .colorimetry import rec709_to_bands as rec709_to_bands
 
@@ -209,3 +209,11 @@ def delta_e_to_exact(khr_rgb, exact_xyz_bands) -> np.ndarray:
         True
     """
     return delta_e2000_rec709(khr_rgb, exact_xyz_bands, CIE_1931)
+
+
+def khr_to_bands(rgb, observer: str) -> Array:
+    """`colorimetry.rec709_to_bands` on a JAX array (…, 3): `khr`'s linear Rec. 709 in the
+    observer's bands, the space every method of `patch_radiance` and `envmap_radiance`
+    returns (its 3×3 matrix a constant of the trace; HIGHEST precision)."""
+    m = jnp.asarray(rec709_to_band_matrix(observer), rgb.dtype)
+    return jnp.matmul(rgb, m.T, precision=jax.lax.Precision.HIGHEST)

@@ -74,39 +74,31 @@ Example (an sRGB rendering of an oxide wedge on silicon, exposure and white bala
 
 from __future__ import annotations
 
-import functools
 import time
 import warnings
 from pathlib import Path
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..brdf.microfacet import patch_quadrature
 from ..core import _validate as V
 from ..core.image import Photo, read_mask, read_photo
-from ..core.material import as_stack
-from ..core.stack import Stack
-from ..optics.stack import stack_reflectance_traced
 from ..spectral.camera import Camera, camera_response, sensitivity_basis
-from .engine import covariance, levenberg_marquardt
+from . import pixelwise as PW
 from .photo_flags import fit_notes
 from .photo_flags import reasons as flag_reasons
 from .photo_light import ILLUMINATIONS, basis, fit_light
-from .photo_screen import (DISTINCT_NM, bucket, chunks, closed_gains, features,
-                           matrix_from_pixels, pad_to, reference_gains, residual, screen_all,
-                           search_gains)
+from .photo_model import (_check_na, _colours, _geometry,  # noqa: F401
+                          _host_hermite, _layer_stack, _refine_all, photo_colours, render_photo)
+from .photo_screen import (DISTINCT_NM, closed_gains, features, matrix_from_pixels,
+                           reference_gains, residual, screen_all, search_gains)
+from .results import MapResult, PhotoResult, chi2_text
 
 __all__ = ["PhotoResult", "fit_photo", "photo_colours", "render_photo"]
 
-_HI = jax.lax.Precision.HIGHEST
 _CANDIDATES = 4  # local minima per pixel kept for the neighbour prior
-#: the patch quadrature of a rough film: against (48, 48), 1.3e-6 (oxide on Si) and 9.4e-7
-#: (soap) of the largest colour over 0–2000 nm at α = 0.3, θ_o = 0.4 (measured), far below
-#: the model floor, at 1/16 of the cost
-_QUADRATURE = (12, 12)
+_ICM_SWEEPS = 6  # sweeps of the neighbour prior over the candidates
 _MODEL_FLOOR = 0.005  # relative model uncertainty (camera, light, material known so well)
 _JPEG_FLOOR = 0.02  # … of a lossy JPEG, in the misfit statistics (quality 75–95: robust χ²
 _JPEG_BLACK_CODES = 6  # 0.8–2.4 with it); codes ≤ this of a JPEG channel are black-clipped
@@ -119,181 +111,11 @@ _PAD_WEIGHT = 3.0  # × the equal-weight factor: the pads are known, the rest is
 _BASIS_SMOOTHING = 1e-2  # second-difference penalty of the sensitivities (`matrix_from_pixels`)
 
 
-class PhotoResult(NamedTuple):
-    """A thickness map fitted to a photograph (`fit_photo`). Maps are (H, W) NumPy arrays;
-    pixels not fitted (clipped, outside `mask`) are NaN (False in `ambiguous`).
-
-    Attributes:
-        thickness, stderr: the fitted thickness of the template's layer and its standard
-            error (nm), scaled by √(robust reduced χ²).
-        ambiguous: another fringe order explains the pixel within its noise.
-        alternative: that other order's thickness (nm; NaN where none was found).
-        chi2: the pixel's χ² (3 residuals).
-        exposure: the green channel's gain g_G (linear camera units per unit reflectance).
-        white_balance: g / g_G (3,).
-        camera_matrix: C (3, 3), rows summing to 1 (the identity for a known camera).
-        camera_matrix_stderr: standard errors of C's entries (zeros unless fitted).
-        reduced_chi2: Σ χ²_p / (2P − n_global).
-        robust_chi2: median χ²_p / (the median of χ² with 2 degrees of freedom): as the
-            reduced χ² for a model that fits, but blind to a few outlying pixels (edges, a
-            wrong order); the misfit warning reads it.
-        warnings: what the fit found wrong (a misfit, clipped pixels, ambiguity).
-        encoding: how the image was read (`core.image.Photo.describe`).
-        camera, illuminant: the camera and light names of the model.
-        n_pixels, seconds: pixels fitted and the wall time (compilation included).
-        stderr_calibrated: False for a lossy (JPEG) file: the standard errors assume
-            independent noise per pixel, calibrated for raw and linear (lossless) input
-            only; a JPEG's block-correlated compression error is not in them.
-        illumination: "uniform" or "smooth"; light: the fitted light field (H, W), 1 at its
-            peak over the fitted pixels (`fit.photo_light`; all ones under uniform light).
-    """
-
-    thickness: np.ndarray
-    stderr: np.ndarray
-    ambiguous: np.ndarray
-    alternative: np.ndarray
-    chi2: np.ndarray
-    exposure: float
-    white_balance: np.ndarray
-    camera_matrix: np.ndarray
-    camera_matrix_stderr: np.ndarray
-    reduced_chi2: float
-    robust_chi2: float
-    warnings: tuple
-    encoding: str
-    camera: str
-    illuminant: str
-    n_pixels: int
-    seconds: float
-    illumination: str = "uniform"
-    light: np.ndarray | None = None
-    stderr_calibrated: bool = True
-
-    @property
-    def chi2_text(self) -> str:
-        """The reduced χ² as every output says it (`chi2_text`)."""
-        return chi2_text(self.robust_chi2, self.reduced_chi2)
-
-    @property
-    def pixels_per_second(self) -> float:
-        return self.n_pixels / self.seconds if self.seconds > 0 else float("inf")
-
-    def summary(self) -> dict:
-        """The fit's global numbers and residual summary (JSON-ready)."""
-        ok = np.isfinite(self.thickness)
-        return {
-            "encoding": self.encoding, "camera": self.camera, "illuminant": self.illuminant,
-            "exposure": float(self.exposure),
-            "white_balance": [float(v) for v in self.white_balance],
-            "camera_matrix": np.asarray(self.camera_matrix).tolist(),
-            "camera_matrix_stderr": np.asarray(self.camera_matrix_stderr).tolist(),
-            "reduced_chi2": float(self.reduced_chi2),
-            "robust_chi2": float(self.robust_chi2),
-            "pixels_fitted": int(self.n_pixels),
-            "pixels_ambiguous": int(np.sum(self.ambiguous)),
-            "median_stderr_nm": float(np.median(self.stderr[ok])) if ok.any() else None,
-            "chi2_p50_p99": [float(np.percentile(self.chi2[ok], q)) for q in (50, 99)]
-            if ok.any() else None,
-            "stderr_calibrated": bool(self.stderr_calibrated),
-            "illumination": self.illumination,
-            "light_min_max": [float(np.nanmin(self.light)), float(np.nanmax(self.light))]
-            if self.light is not None and ok.any() else None,
-            "seconds": float(self.seconds), "pixels_per_second": float(self.pixels_per_second),
-            "warnings": list(self.warnings),
-        }
-
-
-def chi2_text(robust: float, mean: float) -> str:
-    """"reduced chi2 = R (robust; mean M)": the one way the warning, the console and the
-    figure's title say the reduced χ²."""
-    return f"reduced chi2 = {robust:.3g} (robust; mean {mean:.3g})"
-
-
 def _describe(photo: Photo, n_clip: int) -> str:
     """`Photo.describe` with the fit's count of pixels with a clipped channel (its censoring,
     a JPEG's black level included) in place of the reader's: one count everywhere."""
     head = photo.describe().rsplit("; ", 1)[0]
     return f"{head}; {n_clip} pixel{'' if n_clip == 1 else 's'} with a clipped channel"
-
-
-# ----------------------------------------------------------------------------- the model
-def _layer_stack(template, layer: int) -> Stack:
-    stack = as_stack(template)
-    if not 0 <= layer < stack.n_layers:
-        raise ValueError(f"layer must index the template's {stack.n_layers} layer(s), "
-                         f"got {layer}")
-    return stack
-
-
-def _geometry(theta_o, alpha, na=None, stack=None, layer=0, wavelengths=None, hi=None):
-    """(cosines (N,), weights (N,)) at which the reflectance is averaged: the mirror view,
-    the SPEC §7 patch quadrature of a rough surface under uniform light, or a microscope
-    objective's cone of numerical aperture `na` (SPEC §14, `optics.objective.cone_nodes`:
-    uniform in the pupil, nodes enough for the layer at `hi` nm)."""
-    if na is not None:
-        from ..optics.objective import cone_nodes
-
-        d = np.array(np.asarray(stack.thickness, float))
-        d[..., layer] = float(hi) if hi is not None else d[..., layer]
-        return cone_nodes(stack, wavelengths, na, thickness_max=d)
-    if alpha is None:
-        return np.asarray([np.cos(theta_o)]), np.asarray([1.0])
-    quad = patch_quadrature(jnp.float64(theta_o), jnp.float64(alpha), quadrature=_QUADRATURE)
-    return np.asarray(quad.cos_hi).ravel(), np.asarray(quad.weight).ravel()
-
-
-@functools.partial(jax.jit, static_argnames=("layer",))
-def _colours(d, stack, layer, cos, qw, lam, weights):
-    """(s (G, 3), ds/dd (G, 3)) at thicknesses d (G,) of layer `layer` (module docstring)."""
-
-    def s_of(di):
-        st = stack._replace(thickness=jnp.asarray(stack.thickness).at[layer].set(di))
-        r = stack_reflectance_traced(st, cos[:, None], lam[None, :])  # (N, K)
-        rbar = jnp.matmul(qw, r, precision=_HI)  # (K,)
-        return jnp.matmul(rbar, weights, precision=_HI)
-
-    return jax.vmap(lambda di: jax.jvp(s_of, (di,), (jnp.ones_like(di),)))(d)
-
-
-def photo_colours(template, thickness, *, camera: Camera, theta_o=0.0, alpha=None,
-                  layer: int = 0, na=None):
-    """The camera colours s(d) (..., 3) of the template with layer `layer` at `thickness`
-    (..., nm), white-balanced to the camera's light (a white reflector reads 1); `na`: seen
-    through a microscope objective of that numerical aperture (SPEC §14)."""
-    stack = _layer_stack(V.check_material(template, "template",
-                                          wavelengths=camera.wavelengths), layer)
-    d = np.asarray(thickness, float)
-    _check_na(na, theta_o, alpha)
-    cos, qw = _geometry(float(theta_o), alpha, na, stack, layer, camera.wavelengths,
-                        float(np.max(d, initial=0.0)))
-    s, _ = _colours(jnp.asarray(d.ravel()), stack, layer, jnp.asarray(cos), jnp.asarray(qw),
-                    jnp.asarray(camera.wavelengths), jnp.asarray(camera.weights))
-    return np.asarray(s).reshape(*d.shape, -1)
-
-
-def render_photo(template, thickness, *, camera="srgb", illuminant="D65", theta_o=0.0,
-                 alpha=None, layer: int = 0, exposure: float = 1.0,
-                 white_balance=(1.0, 1.0, 1.0), na=None) -> np.ndarray:
-    """A linear photograph (H, W, 3) of the template with the thickness map `thickness`
-    (H, W): exposure · wb_c · s_c(d) of the module docstring (no noise, no encoding). The
-    same model `fit_photo` fits: for tests and examples; studies render independently."""
-    cam = camera_response(camera, illuminant)
-    s = photo_colours(template, thickness, camera=cam, theta_o=theta_o, alpha=alpha,
-                      layer=layer, na=na)
-    return exposure * np.asarray(white_balance, float) * s
-
-
-def _hermite(d, lo, h, s, ds):
-    """Cubic Hermite interpolant of the table (s, ds) (G, 3) on lo + h·g at d (scalar)."""
-    g = s.shape[0]
-    u = (d - lo) / h
-    fi = jnp.clip(jnp.floor(u), 0, g - 2)
-    i = fi.astype(jnp.int32)
-    t = u - fi
-    t2, t3 = t * t, t * t * t
-    h00, h10 = 2 * t3 - 3 * t2 + 1, t3 - 2 * t2 + t
-    h01, h11 = -2 * t3 + 3 * t2, t3 - t2
-    return h00 * s[i] + h10 * h * ds[i] + h01 * s[i + 1] + h11 * h * ds[i + 1]
 
 
 # ----------------------------------------------------------------------------- references
@@ -310,71 +132,6 @@ def _read_reference(reference, valid):
             raise ValueError(f"reference[{i}] thickness must be finite and ≥ 0 nm, got {d}")
         regions.append((m, dv))
     return regions
-
-
-# ----------------------------------------------------------------------------- refine
-@functools.partial(jax.jit, static_argnames=("steps", "want_se"))
-def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, black,
-            steps,
-            want_se):
-    """Per pixel: Levenberg–Marquardt on [(g C s(d) − o)/σ, (d − d_q)/τ]; returns d, the
-    data χ² and the standard error (absolute σ)."""
-
-    def pixel(o, sg, cs, x0, q, ok):
-        def data(x):
-            pred = jnp.matmul(gm, _hermite(x[0], lo, h, s_tab, ds_tab), precision=_HI)
-            return residual(pred, o, sg, cs, black)
-
-        def res(x):
-            return jnp.concatenate([data(x), jnp.where(ok, (x[0] - q) / tau, 0.0)])
-
-        x = levenberg_marquardt(res, x0[None], lo_d[None], hi_d[None], steps)
-        r = data(x)
-        se = covariance(data, x, absolute_sigma=True).stderr[0] if want_se else x[0] * 0
-        return x[0], jnp.sum(r * r), se
-
-    return jax.vmap(pixel)(obs, sig, cens, d0, nb, nb_ok)
-
-
-def _neighbours(d, valid):
-    p = np.pad(d, 1, constant_values=0.0)
-    v = np.pad(valid, 1, constant_values=False)
-
-    def four(a):
-        return np.stack([a[:-2, 1:-1], a[2:, 1:-1], a[1:-1, :-2], a[1:-1, 2:]], axis=-1)
-
-    return four(p), four(v)
-
-
-def _icm(cand_d, cand_chi, valid, tau, sweeps=6):
-    """Iterated conditional modes over K candidate thicknesses per pixel (H, W, K) with
-    energy ½χ² + Σ_q ½((d − d_q)/τ)² (checkerboard updates); returns the chosen index."""
-    h, w, _ = cand_d.shape
-    idx = np.argmin(cand_chi, axis=-1)
-    colour = (np.add.outer(np.arange(h), np.arange(w)) % 2).astype(bool)
-    for _ in range(sweeps):
-        for c in (False, True):
-            cur = np.take_along_axis(cand_d, idx[..., None], -1)[..., 0]
-            nb, ok = _neighbours(np.where(valid, cur, 0.0), valid)
-            pair = np.sum(np.where(ok[..., None, :], ((cand_d[..., :, None] - nb[..., None, :])
-                                                       / tau) ** 2, 0.0), axis=-1)
-            new = np.argmin(0.5 * cand_chi + 0.5 * pair, axis=-1)
-            idx = np.where(colour == c, new, idx)
-    return idx
-
-
-# ----------------------------------------------------------------------------- entry point
-def _check_na(na, theta_o, alpha):
-    """A microscope objective's NA (SPEC §14): a number ≥ 0 (its upper bound, the ambient's
-    index, is checked with the stack), seen along the axis (θ_o = 0) of a mirror (α None)."""
-    if na is None:
-        return
-    if np.ndim(na) != 0 or not np.isfinite(float(na)) or float(na) < 0:
-        raise ValueError(f"na must be a number ≥ 0 (the objective's numerical aperture), "
-                         f"got {na!r}")
-    if float(theta_o) != 0.0 or alpha is not None:
-        raise ValueError("na (a microscope objective) views along its axis: give theta_o=0 "
-                         "and alpha=None with it")
 
 
 def _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor, grid_step_nm,
@@ -421,7 +178,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
               model_floor: float | None = None, grid_step_nm: float = 1.0,
               screen_step_nm: float = 4.0, steps: int = 6,
               chi2_warn: float = 4.0, chunk: int = 4096, progress: bool = False,
-              illumination: str = "uniform", na=None) -> PhotoResult:
+              illumination: str = "uniform", na=None) -> MapResult:
     """Fit the thickness map of a photograph of a film (module docstring; SPEC §13).
 
     Args:
@@ -461,7 +218,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
             pixel coordinates, fitted jointly with the map: `fit.photo_light`).
 
     Returns:
-        `PhotoResult`.
+        `MapResult` (also named `PhotoResult`): the (H, W) maps, gains, camera and light.
 
     Raises:
         ValueError: naming what is wrong: an unreadable or corrupt image, an encoding or bit
@@ -489,190 +246,258 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     stack = _layer_stack(V.check_material(template, "template", wavelengths=cam.wavelengths),
                          layer)
     photo: Photo = read_photo(image, encoding, bit_depth=bit_depth)
-    h, w, _ = photo.linear.shape
     cens_img, black = _censoring(photo, jpeg)
     valid = ~np.all(cens_img > 0, axis=-1)
     if mask is not None:
-        valid &= read_mask(mask, (h, w), name="mask")
+        valid &= read_mask(mask, valid.shape, name="mask")
     if not valid.any():
         raise ValueError("no pixel to fit: every pixel is clipped or outside the mask")
-    def sigma(floor):
-        return np.sqrt(photo.noise ** 2 + (floor * photo.linear) ** 2
-                       + (1e-6 * max(float(photo.linear.max()), 1e-12)) ** 2)
+    run, regions, sig_img = _setup(photo, valid, cens_img, black, reference, stack, layer, cam,
+                                   (lo, hi), (theta_o, alpha, na), grid_step_nm, screen_step_nm,
+                                   model_floor, smoothness_nm, steps, chunk)
+    table = _table(run, cam)
+    gains, cmat, cmat_se = _gains(run, photo, sig_img, cens_img, regions, table, cam.kind)
+    n = run.obs.shape[0]
+    light, ident = np.ones(n), None
+    if illumination == "smooth":  # the field, then the photograph divided by it
+        h, w = valid.shape
+        light, gains, ident = _smooth_light(run.obs, run.sig, run.cens, run.known,
+                                            basis(run.where, h, w), gains, cmat, table,
+                                            run.grid[run.coarse], chunk, steps)
+        run = run._replace(obs=run.obs / light[:, None], sig=run.sig / light[:, None])
+    rounds = _BASIS_ROUNDS if cam.kind == "unknown" else 0
+    run = run._replace(bar=PW.progress(progress, (1 + _CANDIDATES) * n * (1 + rounds) + 2 * n,
+                                       desc="fit_photo", pixels=n))
+    try:
+        fit = _solve(run, table, gains, cmat, regions, cam.kind, illuminant)
+    finally:
+        if run.bar is not None:
+            run.bar.close()
+    sig_rep = (_noise(photo, report_floor).reshape(-1, 3)[run.where] / light[:, None]
+               if report_floor != model_floor else None)
+    score, loud = _score(run, fit, cam, photo, sig_rep, chi2_warn, cens_img, jpeg,
+                         ident if illumination == "smooth" else None)
+    for note in loud:
+        warnings.warn(note, stacklevel=2)
 
-    sig_img = sigma(model_floor)
+    def full(v, fill=np.nan, dtype=float):
+        out = np.full(valid.size, fill, dtype)
+        out[run.where] = v
+        return out.reshape(valid.shape)
 
-    # 1. the table (fine, for the interpolant) and the screen grid (every m-th point)
+    seconds = time.perf_counter() - t0
+    gains = fit.gains
+    return MapResult(
+        thickness=full(fit.d), stderr=full(fit.se * score["scale"]),
+        ambiguous=full(score["amb"], False, bool), alternative=full(fit.d_alt),
+        chi2=full(score["chi"]), loss=0.5 * full(score["chi"]), sigma=None,
+        exposure=float(gains[1]), white_balance=gains / gains[1], camera_matrix=fit.cmat,
+        camera_matrix_stderr=cmat_se, reduced_chi2=score["rchi2"],
+        robust_chi2=score["robust"], warnings=score["notes"], encoding=score["described"],
+        camera=cam.name, illuminant=cam.illuminant, n_pixels=n, seconds=seconds,
+        pixels_per_second=n / seconds if seconds > 0 else float("inf"),
+        illumination=illumination, light=full(light), stderr_calibrated=not jpeg)
+
+
+# ----------------------------------------------------------------------------- the stages
+class _Run(NamedTuple):
+    """One photograph's fitted pixels (n, flat indices `where` of `valid`), their readings,
+    noise and censoring (n, 3), the pads' known thicknesses (NaN elsewhere), the table's grid
+    and the screen's subset of it, and the pipeline's settings."""
+
+    obs: np.ndarray
+    sig: np.ndarray
+    cens: np.ndarray
+    known: np.ndarray
+    pads: np.ndarray
+    valid: np.ndarray
+    where: np.ndarray
+    grid: np.ndarray
+    coarse: np.ndarray
+    lo: float
+    hi: float
+    step: float
+    black: float
+    geom: tuple
+    smoothness_nm: float | None
+    steps: int
+    chunk: int
+    bar: object = None
+
+
+def _noise(photo: Photo, floor):
+    """σ (H, W, 3): the decoded image's noise and the relative model floor f (module
+    docstring), with a floor of 1e-6 of the image's largest value."""
+    return np.sqrt(photo.noise ** 2 + (floor * photo.linear) ** 2
+                   + (1e-6 * max(float(photo.linear.max()), 1e-12)) ** 2)
+
+
+def _setup(photo, valid, cens_img, black, reference, stack, layer, cam, box, view,
+           grid_step_nm, screen_step_nm, model_floor, smoothness_nm, steps, chunk):
+    """(`_Run`, reference regions, σ image): the pixels to fit, the table's grid (step
+    `grid_step_nm`) and the screen's (every m-th point), the view's cosines and weights."""
+    lo, hi = box
+    theta_o, alpha, na = view
+    h, w = valid.shape
+    sig_img = _noise(photo, model_floor)
     g_n = int(np.ceil((hi - lo) / grid_step_nm)) + 1
     grid = np.linspace(lo, hi, g_n)
     step = (hi - lo) / (g_n - 1)
     every = max(1, int(round(screen_step_nm / step)))
     coarse = np.unique(np.r_[np.arange(0, g_n, every), g_n - 1])
     cos, qw = _geometry(float(theta_o), alpha, na, stack, layer, cam.wavelengths, hi)
-    geom = (stack, layer, jnp.asarray(cos), jnp.asarray(qw))
-
-    def table_of(camera_: Camera):
-        s_tab, ds_tab = (np.asarray(v) for v in _colours(
-            jnp.asarray(grid), *geom, jnp.asarray(camera_.wavelengths),
-            jnp.asarray(camera_.weights)))
-        return (lo, hi, step, s_tab, ds_tab, black)
-
-    table = table_of(cam)
-
-    def s_of(d):
-        return _host_hermite(np.asarray([d], float), lo, step, *table[3:5])[0]
-
-    # 2. gains
     where = np.flatnonzero(valid.ravel())
-    obs = photo.linear.reshape(-1, 3)[where]
-    sig = sig_img.reshape(-1, 3)[where]
-    cens = cens_img.reshape(-1, 3)[where]
-    n = obs.shape[0]
     regions = _read_reference(reference, valid)
     known = np.full(h * w, np.nan)
     for m, t in regions:
         known[m.ravel()] = t
     known = known[where]
-    pads = np.isfinite(known)
+    run = _Run(photo.linear.reshape(-1, 3)[where], sig_img.reshape(-1, 3)[where],
+               cens_img.reshape(-1, 3)[where], known, np.isfinite(known), valid, where, grid,
+               coarse, lo, hi, step, black, (stack, layer, jnp.asarray(cos), jnp.asarray(qw)),
+               smoothness_nm, steps, chunk)
+    return run, regions, sig_img
+
+
+def _table(run: _Run, camera: Camera):
+    """The table (lo, hi, step, s (G, 3), ds/dd (G, 3), black) of the camera's colours."""
+    s_tab, ds_tab = (np.asarray(v) for v in _colours(
+        jnp.asarray(run.grid), *run.geom, jnp.asarray(camera.wavelengths),
+        jnp.asarray(camera.weights)))
+    return (run.lo, run.hi, run.step, s_tab, ds_tab, run.black)
+
+
+def _gains(run, photo, sig_img, cens_img, regions, table, kind):
+    """(gains (3,), C, its standard errors): from the reference regions, or the search."""
     if regions:
-        gains, cmat, cmat_se = reference_gains(photo.linear, sig_img, cens_img, regions,
-                                                s_of, cam.kind)
-    else:
-        cmat, cmat_se = np.eye(3), np.zeros((3, 3))
-        gains = search_gains(obs, sig, cens, table[3][coarse], jnp.asarray(grid[coarse]),
-                              chunk, black)
-    light = np.ones(n)
-    if illumination == "smooth":  # the field, then the photograph divided by it
-        light, gains, ident = _smooth_light(obs, sig, cens, known, basis(where, h, w),
-                                            gains, cmat, table, grid[coarse], chunk, steps)
-        obs, sig = obs / light[:, None], sig / light[:, None]
-    tau = float(smoothness_nm) if smoothness_nm is not None else np.inf
+        def s_of(d):
+            return _host_hermite(np.asarray([d], float), run.lo, run.step, *table[3:5])[0]
+
+        return reference_gains(photo.linear, sig_img, cens_img, regions, s_of, kind)
+    gains = search_gains(run.obs, run.sig, run.cens, table[3][run.coarse],
+                         jnp.asarray(run.grid[run.coarse]), run.chunk, run.black)
+    return gains, np.eye(3), np.zeros((3, 3))
+
+
+def _orders(run: _Run, table, gm):
+    """The pipeline's stages 1–3 (`fit.pixelwise`) on the table: screen the k best distinct
+    local minima per pixel, refine each, choose (the lowest χ², or by the neighbour prior);
+    → (d_best, d_alt, has_alt), the pads at their known d."""
     k = _CANDIDATES
-    rounds = _BASIS_ROUNDS if cam.kind == "unknown" else 0
-    bar = _progress(progress, n, (1 + k) * n * (1 + rounds) + 2 * n)
+    n = run.obs.shape[0]
+    top, top_chi = screen_all(run.obs, run.sig, run.cens,
+                              features(table[3][run.coarse] @ gm.T, run.black),
+                              jnp.asarray(run.grid[run.coarse]), k, run.chunk, run.bar)
+    cand0 = run.grid[run.coarse][top]  # (n, k); a missing minimum repeats the pixel's best
+    cand0 = np.where(np.isfinite(top_chi), cand0, cand0[:, :1])
+    rep = (np.repeat(a, k, axis=0) for a in (run.obs, run.sig, run.cens))
+    cd, cchi, _ = (v.reshape(n, k) for v in _refine_all(
+        *rep, cand0.ravel(), None, np.inf, gm, table, run.steps, run.chunk, run.bar))
+    pick = PW.choose(cd, cchi, run.where, run.valid, run.smoothness_nm, _ICM_SWEEPS)
+    d_best = np.where(run.pads, run.known, cd[np.arange(n), pick])
+    d_alt, has_alt = PW.alternative(cd, cchi, d_best, DISTINCT_NM)
+    return d_best, d_alt, has_alt
 
-    def orders(table, gm):
-        """3. screen: the k best distinct local minima per pixel; 4. refine each; choose
-        (best, or by the neighbour prior); → (d_best, d_alt, has_alt), pads at their d."""
-        s_tab = table[3]
-        top, top_chi = screen_all(obs, sig, cens, features(s_tab[coarse] @ gm.T, black),
-                                   jnp.asarray(grid[coarse]), k, chunk, bar)
-        cand0 = grid[coarse][top]  # (n, k); a missing minimum repeats the pixel's best
-        cand0 = np.where(np.isfinite(top_chi), cand0, cand0[:, :1])
-        rep = (np.repeat(a, k, axis=0) for a in (obs, sig, cens))
-        cd, cchi, _ = (v.reshape(n, k) for v in _refine_all(
-            *rep, cand0.ravel(), None, np.inf, gm, table, steps, chunk, bar))
-        if smoothness_nm is None:
-            pick = np.argmin(cchi, axis=-1)
-        else:
-            cd_img = np.zeros((h * w, k))
-            cchi_img = np.full((h * w, k), 1e30)
-            cd_img[where], cchi_img[where] = cd, cchi
-            pick = _icm(cd_img.reshape(h, w, k), cchi_img.reshape(h, w, k), valid,
-                        tau).ravel()[where]
-        rows = np.arange(n)
-        d_best = np.where(pads, known, cd[rows, pick])
-        other = np.where(np.abs(cd - d_best[:, None]) >= DISTINCT_NM, cchi, np.inf)
-        alt = np.argmin(other, axis=-1)
-        has_alt = np.isfinite(other[rows, alt])
-        return d_best, np.where(has_alt, cd[rows, alt], d_best), has_alt
 
-    def model_from_pixels(table, gm, d, kind, sub=slice(None)):
-        s_fit = _host_hermite(d, lo, step, *table[3:5])
-        o, sg, cs, pd = obs[sub], sig[sub], cens[sub], pads[sub]
-        if kind == "unknown":
-            return matrix_from_pixels(o, sg, cs, s_fit)
-        if kind == "basis":  # the pads, known, weigh as much as all other pixels together
-            up = np.sqrt(max((pd.size - pd.sum()) / max(pd.sum(), 1), 1.0)) * _PAD_WEIGHT
-            return matrix_from_pixels(o, sg / np.where(pd, up, 1.0)[:, None], cs, s_fit,
-                                       smooth=_BASIS_SMOOTHING)
-        return closed_gains(o, sg, cs, s_fit @ cmat.T)[:, None] * cmat
+def _model_from_pixels(run: _Run, table, d, kind, cmat, sub=slice(None)):
+    """g C (3, 3) from the pixels `sub` at thicknesses d: an unknown camera's matrix, its
+    sensitivities on the hat basis ("basis", the pads weighing as much as the rest), or the
+    closed-form gains of a known camera."""
+    s_fit = _host_hermite(d, run.lo, run.step, *table[3:5])
+    o, sg, cs, pd = run.obs[sub], run.sig[sub], run.cens[sub], run.pads[sub]
+    if kind == "unknown":
+        return matrix_from_pixels(o, sg, cs, s_fit)
+    if kind == "basis":  # the pads, known, weigh as much as all other pixels together
+        up = np.sqrt(max((pd.size - pd.sum()) / max(pd.sum(), 1), 1.0)) * _PAD_WEIGHT
+        return matrix_from_pixels(o, sg / np.where(pd, up, 1.0)[:, None], cs, s_fit,
+                                  smooth=_BASIS_SMOOTHING)
+    return closed_gains(o, sg, cs, s_fit @ cmat.T)[:, None] * cmat
 
-    try:
-        gm = gains[:, None] * cmat
-        d_best, d_alt, has_alt = orders(table, gm)
-        # 5. gains (no references), an unknown camera's matrix, from every pixel, alternating
-        #    with the thicknesses (the pads fixed at theirs) until they settle
-        # (on a subsample: a handful of global parameters, then every pixel below)
-        sub = np.unique(np.r_[np.arange(0, n, max(1, n // _GAIN_PIXELS)), np.flatnonzero(pads)])
-        d_sub = d_best[sub]
-        for _ in range(_GAIN_ROUNDS if not regions or cam.kind == "unknown" else 0):
-            gm_new = model_from_pixels(table, gm, d_sub, cam.kind, sub)
-            change = np.max(np.abs(gm_new - gm)) / np.max(np.abs(gm))
-            gm = gm_new
-            d_sub = np.where(pads[sub], known[sub], _refine_all(
-                obs[sub], sig[sub], cens[sub], d_sub, None, np.inf, gm, table, steps, chunk,
-                None)[0])
-            if change < 1e-8:
-                break
-        d_best[sub] = d_sub
-        if cam.kind == "unknown":
-            # the 3 × 3 matrix on the observer's bands (reported), then the camera's
-            # sensitivities on a basis of hat functions (Luther's condition fails for real
-            # cameras: a 3 × 3 matrix cannot match them), from every pixel, re-screened
-            cmat3 = gm
-            if rounds:
-                table = table_of(sensitivity_basis(illuminant))
-            for _ in range(rounds):
-                gm = model_from_pixels(table, None, d_best, "basis")
-                d_best, d_alt, has_alt = orders(table, gm)
-            gains = gm.sum(axis=1)
-            cmat = cmat3 / cmat3.sum(axis=1)[:, None]
-        else:
-            gains = np.diag(gm).copy()
-        # the final refine: the chosen thickness (with the neighbour prior) and the other order
-        d, chi, se = _refine_all(obs, sig, cens, d_best, valid if np.isfinite(tau) else None,
-                                 tau, gm, table, steps, chunk, bar, where=where, want_se=True)
-        _, chi_alt, _ = _refine_all(obs, sig, cens, d_alt, None, np.inf, gm, table, steps,
-                                    chunk, bar)
-        chi_alt = np.where(has_alt, chi_alt, np.inf)
-        d_alt = np.where(has_alt, d_alt, np.nan)
-    finally:
-        if bar is not None:
-            bar.close()
 
-    # 5. uncertainty, ambiguity, warnings. The fit's own χ² scales the standard errors and
-    #    the ambiguity test; the misfit statistics use the reporting floor (a JPEG's 2 %,
-    #    which, applied in the fit, would skew the channels' weights and so the white balance)
+class _Fit(NamedTuple):
+    d: np.ndarray
+    chi: np.ndarray
+    se: np.ndarray
+    d_alt: np.ndarray
+    chi_alt: np.ndarray
+    gm: np.ndarray
+    gains: np.ndarray
+    cmat: np.ndarray
+    table: tuple
+
+
+def _solve(run: _Run, table, gains, cmat, regions, kind, illuminant) -> _Fit:
+    """The orders, then the gains (no references; an unknown camera's matrix) alternating
+    with the thicknesses (the pads fixed) until they settle, an unknown camera's
+    sensitivities, and the final refine with the neighbour prior (`fit.pixelwise`)."""
+    n = run.obs.shape[0]
+    gm = gains[:, None] * cmat
+    d_best, d_alt, has_alt = _orders(run, table, gm)
+    # on a subsample: a handful of global parameters, then every pixel below
+    sub = np.unique(np.r_[np.arange(0, n, max(1, n // _GAIN_PIXELS)), np.flatnonzero(run.pads)])
+    d_sub = d_best[sub]
+    for _ in range(_GAIN_ROUNDS if not regions or kind == "unknown" else 0):
+        gm_new = _model_from_pixels(run, table, d_sub, kind, cmat, sub)
+        change = np.max(np.abs(gm_new - gm)) / np.max(np.abs(gm))
+        gm = gm_new
+        d_sub = np.where(run.pads[sub], run.known[sub], _refine_all(
+            run.obs[sub], run.sig[sub], run.cens[sub], d_sub, None, np.inf, gm, table,
+            run.steps, run.chunk, None)[0])
+        if change < 1e-8:
+            break
+    d_best[sub] = d_sub
+    if kind == "unknown":
+        # the 3 × 3 matrix on the observer's bands (reported), then the camera's
+        # sensitivities on a basis of hat functions (Luther's condition fails for real
+        # cameras: a 3 × 3 matrix cannot match them), from every pixel, re-screened
+        cmat3 = gm
+        table = _table(run, sensitivity_basis(illuminant))
+        for _ in range(_BASIS_ROUNDS):
+            gm = _model_from_pixels(run, table, d_best, "basis", cmat)
+            d_best, d_alt, has_alt = _orders(run, table, gm)
+        gains = gm.sum(axis=1)
+        cmat = cmat3 / cmat3.sum(axis=1)[:, None]
+    else:
+        gains = np.diag(gm).copy()
+    tau = float(run.smoothness_nm) if run.smoothness_nm is not None else np.inf
+    d, chi, se = _refine_all(run.obs, run.sig, run.cens, d_best,
+                             run.valid if np.isfinite(tau) else None, tau, gm, table,
+                             run.steps, run.chunk, run.bar, where=run.where, want_se=True)
+    _, chi_alt, _ = _refine_all(run.obs, run.sig, run.cens, d_alt, None, np.inf, gm, table,
+                                run.steps, run.chunk, run.bar)
+    return _Fit(d, chi, se, np.where(has_alt, d_alt, np.nan),
+                np.where(has_alt, chi_alt, np.inf), gm, gains, cmat, table)
+
+
+def _score(run: _Run, fit: _Fit, cam, photo, sig_rep, chi2_warn, cens_img, jpeg, ident):
+    """Stage 4 (`fit.pixelwise`): the χ² statistics, the flags (`photo_flags`) and the
+    notes. The fit's own χ² scales the standard errors and the ambiguity test; the misfit
+    statistics use the reporting floor's σ `sig_rep` where given (a JPEG's 2 %, which,
+    applied in the fit, would skew the channels' weights and so the white balance)."""
+    n = run.obs.shape[0]
+    chi, pads, known = fit.chi, run.pads, run.known
     n_global = 3 + (6 if cam.kind == "unknown" else 0)
     dof = max(2 * n - n_global, 1)
     robust_fit = float(np.median(chi) / _CHI2_2_MEDIAN)
-    scale = np.sqrt(robust_fit)
     span = (float(known[pads].min()), float(known[pads].max())) if (
         cam.kind == "unknown" and pads.any()) else None
-    why = flag_reasons(chi, chi_alt, robust_fit, d, where, (h, w), span)
+    why = flag_reasons(chi, fit.chi_alt, robust_fit, fit.d, run.where, run.valid.shape, span)
     amb = np.any(np.stack(list(why.values())), axis=0)
-    if report_floor != model_floor:
-        pred = _host_hermite(d, lo, step, *table[3:5]) @ gm.T
-        sig_rep = sigma(report_floor).reshape(-1, 3)[where] / light[:, None]
-        chi = np.sum(np.asarray(residual(jnp.asarray(pred), jnp.asarray(obs), jnp.asarray(sig_rep),
-                                          jnp.asarray(cens), black)) ** 2, axis=-1)
+    if sig_rep is not None:
+        pred = _host_hermite(fit.d, run.lo, run.step, *fit.table[3:5]) @ fit.gm.T
+        chi = np.sum(np.asarray(residual(jnp.asarray(pred), jnp.asarray(run.obs),
+                                         jnp.asarray(sig_rep), jnp.asarray(run.cens),
+                                         run.black)) ** 2, axis=-1)
     rchi2 = float(np.sum(chi) / dof)
     robust = float(np.median(chi) / _CHI2_2_MEDIAN)
     misfit = (f"{chi2_text(robust, rchi2)} > {chi2_warn:g}: the model does not explain the "
               f"photograph within its noise (check the encoding ({photo.encoding}), camera "
               f"({cam.name}), light ({cam.illuminant}), view angle and material); "
               f"thicknesses may be wrong") if robust > chi2_warn else None
-    notes, loud = fit_notes(misfit, cens_img, valid, amb, why, jpeg,
-                            ident if illumination == "smooth" else None)
-    for note in loud:
-        warnings.warn(note, stacklevel=2)
+    notes, loud = fit_notes(misfit, cens_img, run.valid, amb, why, jpeg, ident)
     described = _describe(photo, int(np.sum(np.any(cens_img > 0, axis=-1))))
-
-    def full(v, fill=np.nan, dtype=float):
-        out = np.full(h * w, fill, dtype)
-        out[where] = v
-        return out.reshape(h, w)
-
-    return PhotoResult(
-        thickness=full(d), stderr=full(se * scale), ambiguous=full(amb, False, bool),
-        alternative=full(d_alt), chi2=full(chi),
-        exposure=float(gains[1]), white_balance=gains / gains[1], camera_matrix=cmat,
-        camera_matrix_stderr=cmat_se, reduced_chi2=rchi2, robust_chi2=robust,
-        warnings=tuple(notes),
-        encoding=described, camera=cam.name, illuminant=cam.illuminant, n_pixels=n,
-        seconds=time.perf_counter() - t0, illumination=illumination, light=full(light),
-        stderr_calibrated=not jpeg)
+    return {"scale": np.sqrt(robust_fit), "amb": amb, "chi": chi, "rchi2": rchi2,
+            "robust": robust, "notes": tuple(notes), "described": described}, loud
 
 
 def _smooth_light(obs, sig, cens, known, phi, gains, cmat, table, coarse, chunk, steps):
@@ -697,71 +522,3 @@ def _smooth_light(obs, sig, cens, known, phi, gains, cmat, table, coarse, chunk,
     gm0 = gains[:, None] * cmat
     light, gm, ident = fit_light(obs, sig, cens, known, phi, gm0, colour, screen, refine)
     return light, gains * (gm.sum(axis=1) / gm0.sum(axis=1)), ident
-
-
-def _host_hermite(d, lo, h, s, ds):
-    """`_hermite` on the host for a vector d (P,) → (P, 3)."""
-    g = s.shape[0]
-    u = (d - lo) / h
-    i = np.clip(np.floor(u), 0, g - 2).astype(int)
-    t = (u - i)[:, None]
-    t2, t3 = t * t, t * t * t
-    return ((2 * t3 - 3 * t2 + 1) * s[i] + (t3 - 2 * t2 + t) * h * ds[i]
-            + (-2 * t3 + 3 * t2) * s[i + 1] + (t3 - t2) * h * ds[i + 1])
-
-
-def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, where=None,
-                want_se=False):
-    """`_refine` over every pixel in chunks: the neighbour prior (τ finite) needs `valid`
-    (H, W) and the fitted pixels' flat indices `where` (their neighbours' current d0)."""
-    lo, hi, step, s_tab, ds_tab, black = table
-    n = obs.shape[0]
-    if valid is not None:
-        h, w = valid.shape
-        img = np.zeros(h * w)
-        img[where] = d0
-        nb, ok = _neighbours(img.reshape(h, w), valid)
-        nb, ok = nb.reshape(-1, 4)[where], ok.reshape(-1, 4)[where]
-    else:
-        nb, ok = np.zeros((n, 4)), np.zeros((n, 4), bool)
-    consts = (jnp.asarray(min(tau, 1e30)), jnp.asarray(gm), jnp.asarray(lo), jnp.asarray(hi),
-              jnp.asarray(lo), jnp.asarray(step), jnp.asarray(s_tab), jnp.asarray(ds_tab),
-              jnp.asarray(black))
-    out = []
-    size = bucket(n, chunk)
-    for s in chunks(n, size):
-        m = s.stop - s.start
-        r = _refine(*(jnp.asarray(pad_to(a[s], size)) for a in (obs, sig, cens, d0, nb, ok)),
-                    *consts, steps=steps, want_se=want_se)
-        out.append([np.asarray(v)[:m] for v in r])
-        if bar is not None:
-            bar.update(m)
-    return [np.concatenate(v) for v in zip(*out)]
-
-
-class _PixelBar:
-    """A tqdm bar over the image's n pixels fed the fit's passes (`work` pixel-passes in
-    all): it advances n / work per pixel-pass, so it counts pixels, not passes."""
-
-    def __init__(self, bar, n, work):
-        self.bar, self.scale, self.acc, self.done = bar, n / max(work, 1), 0.0, 0
-
-    def update(self, m):
-        self.acc += m * self.scale
-        step = min(int(self.acc), self.bar.total) - self.done
-        if step > 0:
-            self.bar.update(step)
-            self.done += step
-
-    def close(self):
-        if self.done < self.bar.total:
-            self.bar.update(self.bar.total - self.done)
-        self.bar.close()
-
-
-def _progress(on, n, work):
-    if not on:
-        return None
-    from tqdm.auto import tqdm
-
-    return _PixelBar(tqdm(total=n, unit="px", desc="fit_photo", leave=False), n, work)

@@ -124,6 +124,7 @@ from ..spectral.reflectance import band_centroids
 from ..spectral.spectra import get_observer
 from . import params as P
 from .film_spec import (  # the parameter map and the input checks
+    _check_background,
     _check_batching,
     _check_free,
     _check_material,
@@ -452,13 +453,7 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
                    float(np.mean(wavelength)) if V.is_concrete(wavelength) else 550.0)
     box = tuple(jnp.asarray(b, dtype) for b in box)
     if envelope is not None:
-        if background is not None:
-            background = V.check_finite("background", V.as_array("background", background))
-            try:
-                background = jnp.broadcast_to(jnp.asarray(background, dtype), shape)
-            except ValueError:
-                raise ValueError(f"background of shape {np.shape(background)} does not "
-                                 f"broadcast to the observations {shape}") from None
+        background = _check_background(background, shape, dtype)
         return fit_raw(observed.astype(dtype), w, wavelength.astype(dtype),
                        cos_theta.astype(dtype), base, y_starts, x_starts, box, cfg, free,
                        envelope, sigma is not None, background, spectrum_model, _finish)

@@ -203,3 +203,16 @@ def _n_candidates(y_starts, grid, n_solves):
         rows = (y_starts.shape[0] - 1) // int(np.prod(grid))
         n_solves = max(8 * len(grid), 2 * rows + 2)
     return min(int(n_solves), y_starts.shape[0])
+
+
+def _check_background(background, shape, dtype):
+    """A raw spectrum's known background (`fit_spectrum`), finite, broadcast to the
+    observations' shape; None stays None."""
+    if background is None:
+        return None
+    background = V.check_finite("background", V.as_array("background", background))
+    try:
+        return jnp.broadcast_to(jnp.asarray(background, dtype), shape)
+    except ValueError:
+        raise ValueError(f"background of shape {np.shape(background)} does not "
+                         f"broadcast to the observations {shape}") from None

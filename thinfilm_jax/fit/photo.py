@@ -157,6 +157,24 @@ def _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor, gri
     return lo, hi
 
 
+def _check_model(template, camera, illuminant, reference, layer, illumination, view):
+    """(camera response, the template's checked `Stack`) of `fit_photo`, or a ValueError
+    naming the argument."""
+    theta_o, alpha, na = view
+    _check_na(na, theta_o, alpha)
+    if illumination not in ILLUMINATIONS:
+        raise ValueError(f"illumination must be one of {ILLUMINATIONS}, got {illumination!r}")
+    cam = camera_response(camera, illuminant)
+    if not isinstance(reference, (list, tuple, type(None))):
+        raise ValueError("reference must be a list of (mask, thickness_nm) pairs")
+    if cam.kind == "unknown" and not reference:
+        raise ValueError("camera='unknown' needs reference regions of known thickness (at least "
+                         "3 of distinct colour) to fit its 3 × 3 matrix")
+    stack = _layer_stack(V.check_material(template, "template", wavelengths=cam.wavelengths),
+                         layer)
+    return cam, stack
+
+
 def _censoring(photo: Photo, lossy: bool) -> tuple[np.ndarray, float]:
     """((H, W, 3) per channel: 0 a reading, 1 clipped at black, 2 clipped at full scale (≥ 1,
     for integer or sRGB-encoded sources; linear float data have no ceiling); the black level
@@ -234,17 +252,8 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     report_floor = model_floor if report_floor is None else report_floor
     lo, hi = _check_args(theta_o, alpha, thickness_range, smoothness_nm, model_floor,
                          grid_step_nm, chi2_warn)
-    _check_na(na, theta_o, alpha)
-    if illumination not in ILLUMINATIONS:
-        raise ValueError(f"illumination must be one of {ILLUMINATIONS}, got {illumination!r}")
-    cam = camera_response(camera, illuminant)
-    if not isinstance(reference, (list, tuple, type(None))):
-        raise ValueError("reference must be a list of (mask, thickness_nm) pairs")
-    if cam.kind == "unknown" and not reference:
-        raise ValueError("camera='unknown' needs reference regions of known thickness (at least "
-                         "3 of distinct colour) to fit its 3 × 3 matrix")
-    stack = _layer_stack(V.check_material(template, "template", wavelengths=cam.wavelengths),
-                         layer)
+    cam, stack = _check_model(template, camera, illuminant, reference, layer, illumination,
+                              (theta_o, alpha, na))
     photo: Photo = read_photo(image, encoding, bit_depth=bit_depth)
     cens_img, black = _censoring(photo, jpeg)
     valid = ~np.all(cens_img > 0, axis=-1)

@@ -41,7 +41,7 @@ Example (a one-parameter toy model with two fringe orders: the prior picks the o
 continues the neighbours):
     >>> import numpy as np
     >>> from thinfilm_jax.fit.pixelwise import icm
-    >>> energy = np.zeros((1, 3, 2)); energy[0, 0] = [0.0, 5.0]; energy[0, 2] = [0.0, 5.0]
+    >>> energy = np.zeros((1, 3, 2)); energy[0, 0] = energy[0, 2] = [0.0, 50.0]
     >>> values = np.broadcast_to([100.0, 300.0], (1, 3, 2))
     >>> energy[0, 1] = [0.1, 0.0]  # alone, the middle pixel takes 300 nm
     >>> icm(energy, values, np.ones((1, 3), bool), tau=50.0, sweeps=2)[0].tolist()

@@ -26,8 +26,8 @@ level (`sigma`, absolute); the map's reduced χ² and misfit warning are those o
 
 Two front ends over the one per-pixel pipeline (`fit.pixelwise.fit_map`: its stages, the
 neighbour prior and the flags), differing only in the per-pixel model
-``model(x, pixel inputs, shared inputs) → (J,)`` (`fit.map_models`): `fit_patch_map` (uniform light, SPEC §7:
-`patch_one` at the pixel's θ_o) and `fit_envmap_map` (an environment map, SPEC §9:
+``model(x, pixel inputs, shared inputs) → (J,)`` (`fit.map_models`): `fit_patch_map`
+(uniform light, SPEC §7: `patch_one` at the pixel's θ_o) and `fit_envmap_map` (an environment map, SPEC §9:
 `envmap_radiance(method="filtered")` at the pixel's normal and view, background pixels
 masked out of the fit and the prior).
 

@@ -123,6 +123,7 @@ from ..spectral.lut import build_shat_lut
 from ..spectral.reflectance import band_centroids
 from ..spectral.spectra import get_observer
 from . import params as P
+from .engine import covariance
 from .film_spec import (  # the parameter map and the input checks
     _check_background,
     _check_batching,
@@ -140,9 +141,7 @@ from .film_spec import (  # the parameter map and the input checks
     _weights,
 )
 from .forward import patch_model, spectrum_model
-from .engine import covariance
 from .multistart import grid_starts, order_moves, solve_multistart
-from .raw_spectrum import fit_raw, raw_starts
 from .options import (
     DEFAULT_BOUNDS,
     DEFAULT_N_STARTS,
@@ -156,6 +155,7 @@ from .options import (
     misfit_warnings,
     reduced_chi2,
 )
+from .raw_spectrum import fit_raw, raw_starts
 
 __all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "PARAMS", "FitOptions", "FitResult", "SOLVERS",
            "fit_film", "fit_spectrum", "patch_model", "spectrum_model"]

@@ -89,10 +89,26 @@ from . import pixelwise as PW
 from .photo_flags import fit_notes
 from .photo_flags import reasons as flag_reasons
 from .photo_light import ILLUMINATIONS, basis, fit_light
-from .photo_model import (_check_na, _colours, _geometry,  # noqa: F401
-                          _host_hermite, _layer_stack, _refine_all, photo_colours, render_photo)
-from .photo_screen import (DISTINCT_NM, closed_gains, features, matrix_from_pixels,
-                           reference_gains, residual, screen_all, search_gains)
+from .photo_model import (  # noqa: F401
+    _check_na,
+    _colours,
+    _geometry,
+    _host_hermite,
+    _layer_stack,
+    _refine_all,
+    photo_colours,
+    render_photo,
+)
+from .photo_screen import (
+    DISTINCT_NM,
+    closed_gains,
+    features,
+    matrix_from_pixels,
+    reference_gains,
+    residual,
+    screen_all,
+    search_gains,
+)
 from .results import MapResult, PhotoResult, chi2_text
 
 __all__ = ["PhotoResult", "fit_photo", "photo_colours", "render_photo"]

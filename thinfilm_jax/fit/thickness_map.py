@@ -27,9 +27,9 @@ level (`sigma`, absolute); the map's reduced χ² and misfit warning are those o
 Two front ends over the one per-pixel pipeline (`fit.pixelwise.fit_map`: its stages, the
 neighbour prior and the flags), differing only in the per-pixel model
 ``model(x, pixel inputs, shared inputs) → (J,)`` (`fit.map_models`): `fit_patch_map`
-(uniform light, SPEC §7: `patch_one` at the pixel's θ_o) and `fit_envmap_map` (an environment map, SPEC §9:
-`envmap_radiance(method="filtered")` at the pixel's normal and view, background pixels
-masked out of the fit and the prior).
+(uniform light, SPEC §7: `patch_one` at the pixel's θ_o) and `fit_envmap_map` (an
+environment map, SPEC §9: `envmap_radiance(method="filtered")` at the pixel's normal and
+view, background pixels masked out of the fit and the prior).
 
 Example:
     >>> import jax.numpy as jnp
@@ -270,8 +270,8 @@ def fit_envmap_map(image, normal, view, prefiltered, *, alpha, initial: Film,
     own noise and warns past the misfit test; pixels pushed onto the thickness box's bounds
     are counted in a warning; and both these and the pixels that another fringe order fits
     within their (χ²-scaled) noise are flagged `ambiguous`, with that order's thickness in
-    `alternative` (`map_quality.order_flags`). `method="improved"` is the closer model where the light is
-    uneven (bright sources, Figure 3's scenes).
+    `alternative` (`map_quality.order_flags`). `method="improved"` is the closer model where
+    the light is uneven (bright sources, Figure 3's scenes).
 
     Args:
         image: (H, W, J) band radiances; background pixels may hold anything finite.

@@ -2,6 +2,13 @@ r"""The free parameters of `fit_film` and `fit_spectrum` and the checks of their
 box map of the parameters (`engine.to_box`), `_Spec` (names, the `params.ParamMap` into the
 material, layer thicknesses, boxes), validation of the free names, the material, the options,
 σ and the batching (`fit.film_fit` module docstring).
+
+Example (the box map and its inverse):
+    >>> import jax.numpy as jnp
+    >>> from thinfilm_jax.fit.film_spec import _to_x, _to_y
+    >>> y = _to_y(jnp.float64(250.0), 0.0, 1000.0)  # logit(0.25)
+    >>> round(float(y), 6), round(float(_to_x(y, 0.0, 1000.0)), 9)
+    (-1.098612, 250.0)
 """
 
 from __future__ import annotations

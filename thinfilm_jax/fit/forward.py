@@ -7,6 +7,17 @@ and trace-safe (no validation), for the solvers to differentiate.
   band from the film at its centroid, `spectral.reflectance.band_film`, as `patch_radiance`
   does through `spectral.reflectance.per_band`).
 * `spectrum_model`: exact R(θ₁, λ) (SPEC §2, §12), `fit_spectrum`'s model.
+
+Example (`patch_model` is `patch_radiance`'s kernel, vmapped over the view angles):
+    >>> import jax.numpy as jnp
+    >>> from thinfilm_jax import Film, ModelOptions, patch_radiance
+    >>> from thinfilm_jax.fit.forward import patch_model
+    >>> film = Film(300.0, 1.33, 1.0)
+    >>> a = patch_model(film, jnp.array([0.2]), 0.3, method="filtered", quadrature=(8, 8))
+    >>> b = patch_radiance(film, 0.2, 0.3, method="filtered",
+    ...                    options=ModelOptions(quadrature=(8, 8), arithmetic="complex"))
+    >>> bool(jnp.allclose(a[0], b, rtol=1e-12, atol=0))
+    True
 """
 
 from __future__ import annotations

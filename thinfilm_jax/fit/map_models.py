@@ -11,6 +11,12 @@ forward path's own kernel at one point.
 * `render_patch_map`: the uniform-light model over a map of films (tests, examples).
 
 The models are cached (`functools.lru_cache`): one jit compilation per model, not per call.
+
+Example:
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.fit.map_models import render_patch_map
+    >>> render_patch_map(Film(300.0, 1.33, 1.0), [[0.1, 0.2]], 0.2).shape
+    (1, 2, 3)
 """
 
 from __future__ import annotations

@@ -9,6 +9,16 @@ under the light (`spectral.camera`). A pixel's prediction is g C s(d) (gains and
 `fit.photo_screen`); between the table's grid points s(d) is the cubic Hermite interpolant
 (error h⁴ s⁗/384: below 1e-9 at 1 nm steps). `_refine_all` is stage 3 of `fit.pixelwise`
 (`pixelwise.refine_pixel`) on the censored residuals of `photo_screen.residual`.
+
+Example (bare silicon of constant index 3.9 reads R = (2.9 / 4.9)² in every channel: the
+camera's weights are white-balanced, a white reflector reads 1):
+    >>> import numpy as np
+    >>> from thinfilm_jax import Film
+    >>> from thinfilm_jax.spectral.camera import camera_response
+    >>> from thinfilm_jax.fit.photo_model import photo_colours
+    >>> s = photo_colours(Film(0.0, 1.46, 3.9), [0.0], camera=camera_response("srgb", "D65"))
+    >>> np.round(s, 4).tolist(), round((2.9 / 4.9) ** 2, 4)
+    ([[0.3503, 0.3503, 0.3503]], 0.3503)
 """
 
 from __future__ import annotations

@@ -7,6 +7,13 @@ statistics (reduced χ², robust reduced χ², warnings, timing). The fields a f
 value for are None: η₂ and σ for a photograph (one template index; a per-pixel noise model),
 the camera and light fields for a map of band radiances. `PhotoResult` is the same type under
 the name `fit_photo` documented first.
+
+Example:
+    >>> from thinfilm_jax.fit.results import MapResult, PhotoResult, chi2_text
+    >>> PhotoResult is MapResult
+    True
+    >>> chi2_text(1.04, 1.2)
+    'reduced chi2 = 1.04 (robust; mean 1.2)'
 """
 
 from __future__ import annotations

@@ -114,3 +114,17 @@ def test_icm_and_choose():
     d_alt, has = PW.alternative(cand, 2 * energy.reshape(3, 2), np.array([100.0, 100.0, 300.0]),
                                 15.0)
     assert d_alt.tolist() == [300.0, 300.0, 100.0] and has.all()
+
+
+def test_one_result_type():
+    """The map fits and `fit_photo` return the one `MapResult` (`PhotoResult` is its name in
+    the photographs' pages): a map's summary has the χ² statistics and no camera fields."""
+    from thinfilm_jax.fit.photo import PhotoResult
+    from thinfilm_jax.fit.results import MapResult
+
+    assert PhotoResult is MapResult
+    res = _fit(D, _image(D, 300.0), 300.0)
+    assert isinstance(res, MapResult) and res.exposure is None and res.camera is None
+    s = res.summary()
+    assert "exposure" not in s and s["pixels_fitted"] == D.size == res.n_pixels
+    assert s["pixels_ambiguous"] == 0 and s["chi2_p50_p99"][1] < 1e-12

@@ -18,8 +18,9 @@ leading pixel axis, run in padded chunks: one compilation per map, `jax.vmap` in
    (Besag 1986, J. R. Stat. Soc. B 48, 259) over the candidates, each pixel in turn
    (checkerboard order) taking $\arg\min_k \tfrac12\chi^2_{pk} + \tfrac12\sum_{q \in N_4(p)}
    ((d_{pk} - d_q)/τ)^2$: the neighbours vote for the fringe order. Without τ, the lowest.
-3. **Refine** (`refine_pixel`): `steps` Levenberg–Marquardt steps (`engine.levenberg_marquardt`,
-   the one solver of the fits; fixed steps, so the pixels run as one `jax.vmap` with no
+3. **Refine** (`refine_pixel`): `steps` Levenberg–Marquardt steps (Levenberg 1944, Q. Appl.
+   Math. 2, 164; Marquardt 1963, J. SIAM 11, 431; `engine.levenberg_marquardt`, the one
+   solver of the fits; fixed steps, so the pixels run as one `jax.vmap` with no
    data-dependent control flow) on [r_p(x), (d − d_q)/τ], the prior's residuals to the
    neighbours' current values (Jacobi sweeps), clipped to the box; the standard error is
    the linearised σ √((JᵀJ)⁻¹)_dd of the pixel's own data (`engine.covariance`).

@@ -19,19 +19,19 @@ NO_EXAMPLES = {
     "thinfilm_jax.core._io": "private: the atomic file writes of the drivers, no user API",
     "thinfilm_jax.cli._checks": "private: the CLI's range checks of parsed options "
                                 "(tests/cli/test_cli_robustness.py runs them through the CLI)",
-    "thinfilm_jax.studies": "a package docstring only: it defines nothing",
-    "thinfilm_jax.studies._common": "private: materials and error statistics of the studies",
-    "thinfilm_jax.studies._timing": "private: timing and bookkeeping of the studies",
-    "thinfilm_jax.studies.bench": "the driver of `thinfilm-jax bench`: each function runs or "
+    "benchmarks": "a package docstring only: it defines nothing",
+    "benchmarks._common": "private: materials and error statistics of the studies",
+    "benchmarks._timing": "private: timing and bookkeeping of the studies",
+    "benchmarks.bench": "the driver of `python -m benchmarks.bench`: each function runs or "
                                   "reports the whole benchmark (minutes; "
-                                  "tests/studies/test_bench_smoke.py)",
-    "thinfilm_jax.studies.stack_bench": "a benchmark script against installed peers (tmm, "
+                                  "tests/benchmarks/test_bench_smoke.py)",
+    "benchmarks.stack_bench": "a benchmark script against installed peers (tmm, "
                                         "tmm_fast, tmmax in subprocesses): run as a module",
-    "thinfilm_jax.studies.presets_bench": "a timing script: one `run` of five jitted "
+    "benchmarks.presets_bench": "a timing script: one `run` of five jitted "
                                            "`envmap_radiance` calls on 2²⁰ points (minutes)",
-    "thinfilm_jax.studies.scaling": "the device-scaling driver: it spawns one subprocess per "
+    "benchmarks.scaling": "the device-scaling driver: it spawns one subprocess per "
                                     "device count and times the large jobs (minutes)",
-    "thinfilm_jax.studies.coverage": "a seeded study script: its functions are undocumented "
+    "benchmarks.coverage": "a seeded study script: its functions are undocumented "
                                      "steps of `run` (a `patch_radiance` or `fit_film` call, "
                                      "whose examples are in patch.py and fit.py, or summaries "
                                      "and plots of a run's records)",

@@ -1,5 +1,7 @@
-"""Command line: ``thinfilm-jax figure7 | bench | render | fit | fit-map | fit-ellips`` (also
-``python -m thinfilm_jax``)."""
+"""Command line: ``thinfilm-jax figure7 | render | fit | fit-map | fit-photo | fit-ellips`` (also
+``python -m thinfilm_jax``). The research studies and benchmarks are not commands: they live
+in the repository's ``benchmarks/`` folder, outside the installed package (``python -m
+benchmarks.bench`` from a clone, ``make bench``)."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ from ._checks import _add_device_options, _devices, _enable_x64
 def _figure7(args) -> int:
     devices = _devices(args)
     _enable_x64()
-    from ..studies.figure7 import Figure7Config, run_figure7
+    from ..render.figure7 import Figure7Config, run_figure7
 
     fields = {f.name for f in dataclasses.fields(Figure7Config)}
     cfg = Figure7Config(**{k: tuple(v) if isinstance(v, list) else v
@@ -26,44 +28,6 @@ def _figure7(args) -> int:
     print(f"{'row/method':40s} {'ΔE mean':>8s} {'ΔE p95':>8s} {'ΔE max':>8s}")
     for k, v in summary["errors_vs_reference"].items():
         print(f"{k:40s} {v['dE2000_mean']:8.3f} {v['dE2000_p95']:8.3f} {v['dE2000_max']:8.3f}")
-    return 0
-
-
-def _bench(args) -> int:
-    _enable_x64()
-    if args.suite in ("core", "all"):
-        from ..studies.bench import run_bench
-
-        run_bench(out=args.out, quick=args.quick)
-    if args.suite in ("ibl", "all"):
-        from ..studies.ibl_bench import run_ibl_bench
-
-        run_ibl_bench(out=args.out, quick=args.quick)
-    if args.suite in ("scaling", "all"):
-        from ..studies.scaling import QUICK, ScalingConfig, format_table, run_scaling
-
-        cfg = ScalingConfig(**(QUICK if args.quick else {}))
-        print(format_table(run_scaling(cfg, out_dir=args.out)))
-    if args.suite in ("improved", "all"):
-        from ..studies.improved_study import StudyConfig, run
-
-        run(StudyConfig.quick() if args.quick else StudyConfig(), out=args.out)
-    if args.suite in ("models", "all"):
-        from ..studies.models_bench import run_models_bench
-
-        run_models_bench(out=args.out, quick=args.quick)
-    if args.suite in ("colour_table", "all"):
-        from ..studies.colour_table_study import run_colour_table_study
-
-        run_colour_table_study(out=args.out, quick=args.quick)
-    if args.suite in ("materials", "all"):
-        from ..studies import materials_study as ms
-
-        ms.run(ms.MaterialsConfig.tiny() if args.quick else ms.MaterialsConfig(), out=args.out)
-    if args.suite in ("photo", "all"):
-        from ..studies import photo_study
-
-        photo_study.run(out=args.out, quick=args.quick)
     return 0
 
 
@@ -90,9 +54,9 @@ def _given(args, options) -> list[str]:
 
 
 def _render(args) -> int:
-    """`thinfilm-jax render`: one's own scene (sphere, bubble; `studies.scene`) or the study
-    scenes (`studies.render`). Options that do not fit the scene are usage errors."""
-    from ..studies.scene import OWN_SCENES, default_out_dir
+    """`thinfilm-jax render`: one's own scene (sphere, bubble; `render.scene`) or the study
+    scenes (`render.study_scenes`). Options that do not fit the scene are usage errors."""
+    from ..render.scene import OWN_SCENES, default_out_dir
 
     scenes = args.scene or ["sphere"]
     own = [s for s in scenes if s in OWN_SCENES]
@@ -111,7 +75,7 @@ def _render(args) -> int:
         return _render_scene(args, own[0], out, fail)
     from pathlib import Path
 
-    from ..studies.render import RenderConfig, run_render, summary_table
+    from ..render.study_scenes import RenderConfig, run_render, summary_table
 
     kw = {k: tuple(v) for k, v in (("envmaps", args.envmap), ("scenes", scenes),
                                    ("methods", args.method), ("alphas", args.alphas)) if v}
@@ -128,10 +92,10 @@ def _render(args) -> int:
 
 
 def _render_scene(args, scene: str, out: str, fail) -> int:
-    """--scene sphere | bubble (`studies.scene.render_scene`)."""
+    """--scene sphere | bubble (`render.scene.render_scene`)."""
     from pathlib import Path
 
-    from ..studies.scene import SceneConfig, format_summary, make_material, render_scene
+    from ..render.scene import SceneConfig, format_summary, make_material, render_scene
 
     if args.envmap and len(args.envmap) > 1:
         fail(f"--scene {scene} renders under one map; got {len(args.envmap)} --envmap")
@@ -189,12 +153,13 @@ def _fit(args) -> int:
 
 
 def _index_arg(option: str):
-    """argparse type of an index option: a usage error (exit 2) names the bundled materials."""
+    """argparse type of an index option (`interop.index_text.parse_index`): a usage error
+    (exit 2) names the bundled materials."""
     def parse(text):
-        from ..studies.scene import parse_index
+        from ..interop.index_text import parse_index
 
         try:
-            return parse_index(text, option)
+            return parse_index(text)
         except ValueError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
 
@@ -203,11 +168,11 @@ def _index_arg(option: str):
 
 
 def _layers_arg(text):
-    """argparse type of --layers (`studies.scene.parse_layers`)."""
-    from ..studies.scene import parse_layers
+    """argparse type of --layers: [(index, thickness nm)] (`interop.index_text.parse_layers`)."""
+    from ..interop.index_text import parse_layers
 
     try:
-        return parse_layers(text)
+        return parse_layers(text, indices=True)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
 
@@ -254,31 +219,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_device_options(f7)
     f7.set_defaults(func=_figure7)
 
-    b = sub.add_parser("bench", help="error against run time of every method and peers",
-                       description="Time every evaluation path (compile time separate from warm "
-                                   "run time) and measure its error; print a table, write JSON.")
-    b.add_argument("--out", default="figures", help="output folder (default: figures)")
-    b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
-    b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "models",
-                                       "colour_table", "materials", "photo", "all"],
-                   default="core",
-                   help="core: error vs run time, peers, specialisation (default); ibl: the "
-                        "2560×1440 IBL frame and the real-time options' errors; scaling: the "
-                        "large jobs on 1, 2 and 4 devices (subprocesses); improved: "
-                        "method='improved' against filtered (regions, IBL renders, "
-                        "kernel cost, Pareto); models: the classic lobes with a thin film, "
-                        "Schlick tint and the film methods against the exact film "
-                        "(figures/models.*); colour_table: Kneiphof & Klein 2022's prefiltered "
-                        "colour table against filtered, improved and the reference per map "
-                        "(figures/colour_table.*); materials: colour charts of films on "
-                        "silicon, constant vs dispersive Si, the real-time methods on "
-                        "dispersive films (figures/materials.*); photo: thickness maps from "
-                        "synthetic photographs and fit_spectrum against optifik "
-                        "(figures/photo_study.*); all: the eight")
-    b.set_defaults(func=_bench)
-
     from ..shading.envmap import SHIPPED
-    from ..studies.render import METHODS as RENDER_METHODS
+    from ..render.study_scenes import METHODS as RENDER_METHODS
 
     rd = sub.add_parser("render", help="a film or stack on a sphere, a soap bubble, or the "
                         "study scenes (Kneiphof Figs. 3-6), under an environment map",

@@ -1,21 +1,21 @@
 """Smoke test of `python -m benchmarks.bench --suite models` (benchmarks/models_bench.py) at
-its quick sizes, through the command line, plus the physics its rows rest on."""
+its quick sizes, through its command line (`benchmarks.bench.main`), plus the physics its rows rest on."""
 
 import json
 
 import numpy as np
 
-from thinfilm_jax import Film, rgb_reflectance
-from thinfilm_jax.cli.main import main
-from thinfilm_jax.spectral import colorimetry as C
+from benchmarks.bench import main
 from benchmarks.models_bench import delta_e, tint_f0
+from thinfilm_jax import Film, rgb_reflectance
+from thinfilm_jax.spectral import colorimetry as C
 
 
 def test_models_suite_quick_writes_its_outputs(tmp_path):
     """The quick run (one lobe, one film, one α, methods khr and improved, an 8 × 16 map)
     writes the JSON, the table and the figure; every ΔE is finite and ≥ 0, every cost > 0.
     The full run's numbers are figures/models.md."""
-    assert main(["bench", "--suite", "models", "--quick", "--out", str(tmp_path)]) == 0
+    assert main(["--suite", "models", "--quick", "--out", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "models.json").read_text())
     rows = res["schlick_tint"] + res["film_methods"] + res["ibl"]["rows"]
     assert rows and all(np.isfinite(r["dE2000_mean"]) and r["dE2000_mean"] >= 0 for r in rows)

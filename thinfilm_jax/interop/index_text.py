@@ -43,8 +43,11 @@ def parse_index(source):
         try:
             v = float(text)
         except ValueError:
+            compact = text.replace(" ", "")
+            if compact.endswith("i"):  # n+κi, the mathematicians' spelling
+                compact = compact[:-1] + "j"
             try:
-                v = complex(text.replace(" ", "").replace("i", "j"))
+                v = complex(compact)
             except ValueError:
                 from ..optics.materials import refractive_index
 

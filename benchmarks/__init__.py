@@ -1,10 +1,15 @@
-"""Studies and benchmarks: what the library measures about itself, outside the core.
+"""Studies and benchmarks: what the library measures about itself, outside the package.
 
-Nothing in the core imports this package; ``thinfilm-jax figure7`` and ``python -m benchmarks.bench``
-import it lazily. One concern per module:
+A folder of the repository, beside `thinfilm_jax/` and not in its wheel: run from a clone,
+at its root (``pip install -e '.[bench,plots]'``, or ``make setup``), as ``python -m
+benchmarks.<module>``. Nothing in `thinfilm_jax` imports it; it imports the library's public
+names (tests/test_layout.py lists the few private ones left). What users run stays in the
+library: ``thinfilm-jax figure7`` and ``thinfilm-jax render`` (`thinfilm_jax.render`). One
+concern per module; the main ones:
 
-* `figure7` — Figure 7 of Kneiphof et al. 2019 (``thinfilm-jax figure7``, ``make figure7``).
-* `bench` — ``python -m benchmarks.bench``: runs the studies below, writes the report and the targets.
+* `bench` — ``python -m benchmarks.bench`` (``make bench``): runs the studies below, writes
+  the report and the targets; ``--suite`` runs the other studies (ibl, scaling, improved,
+  models, colour_table, materials, photo).
 * `error_runtime` — error against run time of every evaluation path and knob.
 * `pareto` — the error-vs-run-time table, Pareto front and figure.
 * `peers` — `airy_reflectance` against tmm, NumPy and colour-science.
@@ -12,5 +17,8 @@ import it lazily. One concern per module:
 * `stability`, `stiff` — every public function at stiff and extreme inputs (asserted by
   tests/benchmarks/test_stability.py).
 * `fit_study` — seeded recovery study of the fits (``python -m benchmarks.fit_study``).
+* `gpu_check` — ``make gpu-check``: the suite and the GPU table on an accelerator.
 * `_timing`, `_common` — timing, materials, error statistics shared by the above.
+
+The full list, one line per module: docs/reference/layout.md.
 """

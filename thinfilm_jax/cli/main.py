@@ -1,7 +1,8 @@
-"""Command line: ``thinfilm-jax figure7 | render | fit | fit-map | fit-photo | fit-ellips`` (also
-``python -m thinfilm_jax``). The research studies and benchmarks are not commands: they live
-in the repository's ``benchmarks/`` folder, outside the installed package (``python -m
-benchmarks.bench`` from a clone, ``make bench``)."""
+"""Command line: ``thinfilm-jax figure7 | render | fit | fit-map | fit-ellips | bench`` (also
+``python -m thinfilm_jax``). The research studies and benchmarks are not in the installed
+package: they live in the repository's ``benchmarks/`` folder (``python -m benchmarks.bench``
+from a clone, ``make bench``); ``thinfilm-jax bench`` hands its arguments to that command when
+it finds the clone (`_bench`), and says so when it does not."""
 
 from __future__ import annotations
 
@@ -29,6 +30,37 @@ def _figure7(args) -> int:
     for k, v in summary["errors_vs_reference"].items():
         print(f"{k:40s} {v['dE2000_mean']:8.3f} {v['dE2000_p95']:8.3f} {v['dE2000_max']:8.3f}")
     return 0
+
+
+def find_benchmarks():
+    """The `benchmarks` package of the clone this library runs from (an editable install:
+    the folder beside `thinfilm_jax/`) or of the current folder; ImportError saying where the
+    studies live when neither has it (an installed wheel holds no studies)."""
+    import importlib
+    from pathlib import Path
+
+    for root in (Path(__file__).resolve().parents[2], Path.cwd()):
+        if (root / "benchmarks" / "__init__.py").is_file():
+            if str(root) not in sys.path:
+                sys.path.insert(0, str(root))
+            return importlib.import_module("benchmarks")
+    raise ImportError("thinfilm-jax bench runs the studies of the repository's benchmarks/ "
+                      "folder, which the installed package does not hold: from a clone, "
+                      "`pip install -e '.[bench,plots]'` and `python -m benchmarks.bench`")
+
+
+def _bench(argv: list[str]) -> int:
+    """``thinfilm-jax bench ARGS``: ``python -m benchmarks.bench ARGS`` of the clone (its
+    options are its own, ``--help`` included); exit status 2 and one line when there is no
+    clone to run."""
+    try:
+        find_benchmarks()
+    except ImportError as e:
+        print(f"thinfilm-jax bench: error: {e}", file=sys.stderr)
+        return 2
+    from benchmarks.bench import main as bench_main
+
+    return bench_main(argv)
 
 
 # the own scenes' options: argparse destination and the scenes that take each (the study
@@ -177,48 +209,9 @@ def _layers_arg(text):
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``thinfilm-jax`` parser; a sub-command's unset options stay None (the study's defaults
-    apply, SPEC §7).
-
-    Example:
-        >>> args = build_parser().parse_args(["figure7", "--resolution", "32"])
-        >>> args.command, args.resolution, args.out, args.thickness
-        ('figure7', 32, 'figures', None)
-    """
-    from .. import __version__
-
-    p = argparse.ArgumentParser(prog="thinfilm-jax", description=__doc__)
-    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
-
-    f7 = sub.add_parser("figure7", help="reproduce Figure 7 of Kneiphof et al. 2019",
-                        description="Render the eight panels (a)-(h) and the ΔE error maps into "
-                                    "--out (figure7.png, figure7_error.png, figure7.json, "
-                                    "figure7.npz). Defaults follow SPEC §7.")
-    f7.add_argument("--out", default="figures", help="output folder (default: figures)")
-    f7.add_argument("--resolution", type=int, help="pixels per panel side (default 64; paper 256)")
-    f7.add_argument("--eta-film", dest="eta_film", type=float, help="film IOR η₂ (1.3)")
-    f7.add_argument("--eta-base", dest="eta_base", type=float, help="base IOR η₃ (2.0)")
-    f7.add_argument("--kappa-base", dest="kappa_base", type=float, help="base κ₃ (0.5)")
-    f7.add_argument("--thickness", type=float, help="film thickness of row (a)-(d), nm (600)")
-    f7.add_argument("--alpha", type=float, help="GGX α of row (e)-(h) (0.25)")
-    f7.add_argument("--thickness-max", dest="thickness_max", type=float,
-                    help="largest thickness of row (e)-(h), nm (1000)")
-    f7.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"])
-    f7.add_argument("--terms", type=int, help="Fourier orders M of the real-time methods (2)")
-    f7.add_argument("--quadrature", type=int, nargs=2, metavar=("N_U", "N_PHI"),
-                    help="half-vector quadrature orders (n_u, n_phi) (32 32)")
-    f7.add_argument("--shat", choices=["exact", "lut", "gaussian"],
-                    help="filtered Ŝ source of K 29 (exact)")
-    f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")
-    f7.add_argument("--quiet", action="store_true", help="no progress bar")
-    f7.add_argument("--timing", metavar="PATH", help="also write the run's times, device and "
-                    "load average to PATH as JSON (`make bench`: figures/figure7_timing.json); "
-                    "--out holds the results only, the same on every run")
-    _add_device_options(f7)
-    f7.set_defaults(func=_figure7)
-
+def _add_render_parser(sub) -> None:
+    """The ``render`` sub-command: one's own scene (`render.scene`) or the study scenes
+    (`render.study_scenes`)."""
     from ..shading.envmap import SHIPPED
     from ..render.study_scenes import METHODS as RENDER_METHODS
 
@@ -296,6 +289,54 @@ def build_parser() -> argparse.ArgumentParser:
     _add_device_options(rd)
     rd.set_defaults(func=_render, render_parser=rd)
 
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``thinfilm-jax`` parser; a sub-command's unset options stay None (the study's defaults
+    apply, SPEC §7).
+
+    Example:
+        >>> args = build_parser().parse_args(["figure7", "--resolution", "32"])
+        >>> args.command, args.resolution, args.out, args.thickness
+        ('figure7', 32, 'figures', None)
+    """
+    from .. import __version__
+
+    p = argparse.ArgumentParser(prog="thinfilm-jax", description=__doc__)
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    f7 = sub.add_parser("figure7", help="reproduce Figure 7 of Kneiphof et al. 2019",
+                        description="Render the eight panels (a)-(h) and the ΔE error maps into "
+                                    "--out (figure7.png, figure7_error.png, figure7.json, "
+                                    "figure7.npz). Defaults follow SPEC §7.")
+    f7.add_argument("--out", default="figures", help="output folder (default: figures)")
+    f7.add_argument("--resolution", type=int, help="pixels per panel side (default 64; paper 256)")
+    f7.add_argument("--eta-film", dest="eta_film", type=float, help="film IOR η₂ (1.3)")
+    f7.add_argument("--eta-base", dest="eta_base", type=float, help="base IOR η₃ (2.0)")
+    f7.add_argument("--kappa-base", dest="kappa_base", type=float, help="base κ₃ (0.5)")
+    f7.add_argument("--thickness", type=float, help="film thickness of row (a)-(d), nm (600)")
+    f7.add_argument("--alpha", type=float, help="GGX α of row (e)-(h) (0.25)")
+    f7.add_argument("--thickness-max", dest="thickness_max", type=float,
+                    help="largest thickness of row (e)-(h), nm (1000)")
+    f7.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"])
+    f7.add_argument("--terms", type=int, help="Fourier orders M of the real-time methods (2)")
+    f7.add_argument("--quadrature", type=int, nargs=2, metavar=("N_U", "N_PHI"),
+                    help="half-vector quadrature orders (n_u, n_phi) (32 32)")
+    f7.add_argument("--shat", choices=["exact", "lut", "gaussian"],
+                    help="filtered Ŝ source of K 29 (exact)")
+    f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")
+    f7.add_argument("--quiet", action="store_true", help="no progress bar")
+    f7.add_argument("--timing", metavar="PATH", help="also write the run's times, device and "
+                    "load average to PATH as JSON (`make bench`: figures/figure7_timing.json); "
+                    "--out holds the results only, the same on every run")
+    _add_device_options(f7)
+    f7.set_defaults(func=_figure7)
+
+    _add_render_parser(sub)
+    # listed for --help; `main` hands everything after "bench" to the clone's command
+    sub.add_parser("bench", add_help=False, help="the studies of a clone's benchmarks/ folder "
+                   "(python -m benchmarks.bench; --help lists its options)")
+
     from . import fit as fit_cli
 
     ft = sub.add_parser("fit", help="fit film parameters to observed patch colours or spectra",
@@ -316,6 +357,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     from ._checks import check_args, run_command
 
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["bench"]:
+        return _bench(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     check_args(parser, args)  # out-of-range options: usage error before any work

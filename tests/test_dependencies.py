@@ -60,7 +60,8 @@ def _third_party_imports(path: Path):
             continue
         for name in names:
             top = name.split(".")[0]
-            if top != "thinfilm_jax" and top not in sys.stdlib_module_names:
+            # the repository's own packages: the library and its studies (benchmarks/)
+            if top not in ("thinfilm_jax", "benchmarks") and top not in sys.stdlib_module_names:
                 yield top, node.lineno
 
 

@@ -178,8 +178,9 @@ def _private_imports(path: Path):
 
 def test_benchmarks_import_public_names():
     """The studies (benchmarks/, outside the package) import the library's public names, but
-    for the listed private ones (`PRIVATE_IMPORTS`); none of them imports `benchmarks` from
-    the package, and the package never imports `benchmarks`."""
+    for the listed private ones (`PRIVATE_IMPORTS`), and the package never imports
+    `benchmarks` (nor `tests`) but in ``thinfilm-jax bench``, which hands over to the clone's
+    `benchmarks.bench` (cli/main.py, lazily)."""
     found = {}
     for path in sorted((ROOT / "benchmarks").glob("*.py")):
         for name in _private_imports(path):
@@ -195,6 +196,8 @@ def test_benchmarks_import_public_names():
             mods = ([a.name for a in node.names] if isinstance(node, ast.Import) else
                     [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
                     else [])
+            if path.relative_to(ROOT).as_posix() == "thinfilm_jax/cli/main.py":
+                mods = [m for m in mods if m != "benchmarks.bench"]
             assert not any(m.split(".")[0] in ("benchmarks", "tests") for m in mods), \
                 f"{path.relative_to(ROOT)} imports {mods}"
 

@@ -9,7 +9,7 @@ STAMP := $(BIN)/.thinfilm_jax-installed
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test]'
+	$(BIN)/python -m pip install -q -e '.[test,plots]'
 	touch $@
 
 setup: $(STAMP)
@@ -30,9 +30,9 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/thinfilm-jax figure7 --out figures --quiet --timing figures/figure7_timing.json
-	$(BIN)/thinfilm-jax bench --out figures
+	$(BIN)/python -m benchmarks.bench --out figures
 
-# The accelerator check (thinfilm_jax/studies/gpu_check.py). The device machine is offline and
+# The accelerator check (benchmarks/gpu_check.py). The device machine is offline and
 # has JAX, NumPy, SciPy, matplotlib, optimistix and pytest but not these three: `make
 # gpu-wheels` here downloads them for its Python 3.12 into .whl/ (ignored by git, ≈ 18 MB),
 # `make gpu-check` there installs them and runs the suite, the GPU table and the kernel bench
@@ -50,4 +50,4 @@ gpu-check:
 	@if ls .whl/*.whl >/dev/null 2>&1; then $(PY) -m pip install -q --no-index --no-deps \
 	  --no-compile --no-cache-dir --upgrade --target /tmp/thinfilm_site .whl/*.whl; fi
 	PYTHONPATH=$$PWD:/tmp/thinfilm_site$${PYTHONPATH:+:$$PYTHONPATH} \
-	  $(PY) -m thinfilm_jax.studies.gpu_check $(GPU_CHECK_ARGS)
+	  $(PY) -m benchmarks.gpu_check $(GPU_CHECK_ARGS)

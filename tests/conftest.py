@@ -47,7 +47,7 @@ import pytest  # noqa: E402
 # so that a module's fixtures and the programs its tests share are built once, in one
 # worker; tests that share nothing expensive with their file get units of their own, so that
 # long tests run on both workers: each notebook runs in its own kernel, and each stiff patch
-# grid of tests/studies/test_stability.py is one compiled program (`stability._patch_variant`)
+# grid of tests/benchmarks/test_stability.py is one compiled program (`stability._patch_variant`)
 # while its other checks share one per dtype (`stability._rgb_group`).
 # Long tests that build everything they need themselves (no module fixture, no program
 # another test of their file compiles): one unit per parametrisation. The persistent
@@ -71,7 +71,7 @@ def _unit(nodeid: str) -> str:
 # grids; matched anywhere in the unit): xdist's own order (most tests first) would start
 # single-test units last and leave one worker alone with a long test at the end.
 FIRST = ("tests/test_notebooks.py::", "tests/fit/test_fit.py::test_fitting_notebook_executes",
-         "tests/studies/test_stability.py:", "tests/shading/test_ibl.py::test_stiff_inputs_finite_and_bounded[")
+         "tests/benchmarks/test_stability.py:", "tests/shading/test_ibl.py::test_stiff_inputs_finite_and_bounded[")
 
 
 def _rank(nodeid: str) -> int:

@@ -1,5 +1,6 @@
 """The package's layout: docs/reference/layout.md names every module once (and nothing else),
-the layers import only earlier layers, no cycles, one version, no tracker references."""
+the layers import only earlier layers, no cycles, one version, no tracker references; the
+studies in `benchmarks/` (outside the package) are listed too and import only public names."""
 
 import re
 from pathlib import Path
@@ -7,20 +8,32 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_layout_matches_tree():
-    """docs/reference/layout.md (the package layout page the README links to, on the docs
-    site) has one table row per module of thinfilm_jax/: none missing, none extra, none twice."""
+def _listed(prefix: str = "") -> list[str]:
+    """The modules docs/reference/layout.md lists: the package's (`prefix` "") or those of the
+    repository folder `prefix` (e.g. "benchmarks/"), relative to it."""
     section = (ROOT / "docs" / "reference" / "layout.md").read_text(encoding="utf-8")
     listed = re.findall(r"^\| `([^`]+\.py)` \|", section, flags=re.M)
-    package = ROOT / "thinfilm_jax"
-    modules = sorted(str(p.relative_to(package)) for p in package.rglob("*.py"))
-    assert len(listed) == len(set(listed)), "a module is listed twice"
-    missing, extra = sorted(set(modules) - set(listed)), sorted(set(listed) - set(modules))
-    assert not missing and not extra, f"add to docs/reference/layout.md: {missing}; remove: {extra}"
+    if prefix:
+        return [m[len(prefix):] for m in listed if m.startswith(prefix)]
+    return [m for m in listed if not m.startswith("benchmarks/")]
+
+
+def test_layout_matches_tree():
+    """docs/reference/layout.md (the package layout page the README links to, on the docs
+    site) has one table row per module of thinfilm_jax/, and one per module of benchmarks/:
+    none missing, none extra, none twice."""
+    for folder, prefix in (("thinfilm_jax", ""), ("benchmarks", "benchmarks/")):
+        listed = _listed(prefix)
+        package = ROOT / folder
+        modules = sorted(str(p.relative_to(package)) for p in package.rglob("*.py"))
+        assert len(listed) == len(set(listed)), f"a module of {folder} is listed twice"
+        missing, extra = sorted(set(modules) - set(listed)), sorted(set(listed) - set(modules))
+        assert not missing and not extra, (f"add to docs/reference/layout.md: {prefix}{missing}; "
+                                           f"remove: {extra}")
 
 
 LAYERS = ("core", "optics", "spectral", "brdf", "realtime", "shading", "fit", "interop",
-          "studies", "cli")
+          "render", "cli")
 
 
 def _imports(path: Path, package: str):
@@ -47,7 +60,7 @@ def _imports(path: Path, package: str):
 
 
 def test_layers_import_only_downwards():
-    """core → optics → spectral → brdf → realtime → shading → fit → interop → studies → cli: a
+    """core → optics → spectral → brdf → realtime → shading → fit → interop → render → cli: a
     module imports its own layer and those before it, never one after (README "## Layout")."""
     package = ROOT / "thinfilm_jax"
     bad = []
@@ -122,6 +135,78 @@ def test_no_tracker_references():
 
 
 def test_tests_mirror_the_layers():
-    """Every test folder is named after a layer of the package (README "## Layout")."""
+    """Every test folder is named after a layer of the package (README "## Layout"), or is
+    `tests/benchmarks` (the studies outside the package)."""
     folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and p.name != "__pycache__"}
-    assert folders <= set(LAYERS), sorted(folders - set(LAYERS))
+    assert folders <= set(LAYERS) | {"benchmarks"}, sorted(folders - set(LAYERS))
+
+
+#: the private names of the library the studies still import, each with why: a new one is an
+#: error here (make the library offer a public function instead), a fixed one must be removed
+PRIVATE_IMPORTS = {
+    # file output (atomic writes, JSON with the library's number format): core's, not public
+    "thinfilm_jax.core._io": "atomic_write, write_json: the studies write their files as the "
+                             "library does",
+    # the exact IBL's per-texel integrand, timed and ablated piece by piece (improved_study,
+    # small_sources): no public counterpart
+    "thinfilm_jax.shading.ibl._interp": "improved_study's per-bin exact light",
+    "thinfilm_jax.shading.ibl._lobe_cos_weight": "improved_study's per-bin exact light",
+    "thinfilm_jax.shading.ibl._r_table": "improved_study's per-bin exact light",
+    "thinfilm_jax.shading.ibl_integrand._lobe_cos_weight": "small_sources' per-bin exact light",
+}
+
+
+def _private_imports(path: Path):
+    """`module` or `module.name` of every import of `path` from thinfilm_jax that names a
+    private module or a private name (underscore; dunders excepted)."""
+    import ast
+
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and not node.level and node.module \
+                and node.module.split(".")[0] == "thinfilm_jax":
+            if any(p.startswith("_") for p in node.module.split(".")):
+                yield node.module
+            for a in node.names:
+                if a.name.startswith("_") and not a.name.startswith("__"):
+                    yield f"{node.module}.{a.name}"
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == "thinfilm_jax" and any(
+                        p.startswith("_") for p in a.name.split(".")):
+                    yield a.name
+
+
+def test_benchmarks_import_public_names():
+    """The studies (benchmarks/, outside the package) import the library's public names, but
+    for the listed private ones (`PRIVATE_IMPORTS`), and the package never imports
+    `benchmarks` (nor `tests`) but in ``thinfilm-jax bench``, which hands over to the clone's
+    `benchmarks.bench` (cli/main.py, lazily)."""
+    found = {}
+    for path in sorted((ROOT / "benchmarks").glob("*.py")):
+        for name in _private_imports(path):
+            found.setdefault(name, []).append(path.name)
+    new = {k: v for k, v in found.items() if k not in PRIVATE_IMPORTS}
+    gone = sorted(set(PRIVATE_IMPORTS) - set(found))
+    assert not new, f"private library names imported by benchmarks/: {new}"
+    assert not gone, f"no longer imported, remove from PRIVATE_IMPORTS: {gone}"
+    import ast
+
+    for path in sorted((ROOT / "thinfilm_jax").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            mods = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                    [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
+                    else [])
+            if path.relative_to(ROOT).as_posix() == "thinfilm_jax/cli/main.py":
+                mods = [m for m in mods if m != "benchmarks.bench"]
+            assert not any(m.split(".")[0] in ("benchmarks", "tests") for m in mods), \
+                f"{path.relative_to(ROOT)} imports {mods}"
+
+
+def test_private_import_scan_sees_one(tmp_path):
+    """The scan finds a private module, a private name and ignores public ones."""
+    mod = tmp_path / "m.py"
+    mod.write_text("from thinfilm_jax.core._io import write_json\n"
+                   "from thinfilm_jax.shading.ibl import _r_table, envmap_radiance\n"
+                   "import numpy as _np\nfrom thinfilm_jax import Film\n")
+    assert list(_private_imports(mod)) == ["thinfilm_jax.core._io",
+                                           "thinfilm_jax.shading.ibl._r_table"]

@@ -3,7 +3,7 @@
 A newcomer runs `make figure7`, then `make test`: the job must not dirty the tree, and no
 test may then depend on how fast the machine ran it. So the job's output folder holds its
 results only (the configuration, the errors against the reference, the band values and the
-panels, `thinfilm_jax.studies.figure7.run_figure7`), which a rerun on this machine writes
+panels, `thinfilm_jax.render.figure7.run_figure7`), which a rerun on this machine writes
 byte for byte; its times go to stdout (and to ``--timing PATH``, which `make bench` uses for
 figures/figure7_timing.json, the file the docs' timing sentence quotes).
 

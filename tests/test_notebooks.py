@@ -48,7 +48,7 @@ def test_figure7_notebook(tmp_path):
 @pytest.mark.slow
 def test_error_vs_runtime_notebook(tmp_path):
     """The notebook on the committed ``figures/bench.json`` (the benchmark's own code path runs
-    in tests/studies/test_bench_smoke.py; here the notebook must read the committed format). What it
+    in tests/benchmarks/test_bench_smoke.py; here the notebook must read the committed format). What it
     shows obeys the physics of each path: the reference has zero error against itself; the
     Fourier truncation error falls with M (geometric: ρ^M, ρ = √(R₁₂R₂₃) < 1; committed
     p95 24 → 4.2 → 0.87 → … → 5e-4 over M = 0 … 10); the quadrature error falls with the

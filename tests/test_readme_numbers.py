@@ -419,7 +419,7 @@ def _ibl_render_rows():
 
 
 def _ibl_markdown():
-    from thinfilm_jax.studies.ibl_bench import markdown
+    from benchmarks.ibl_bench import markdown
 
     return markdown(artifact("ibl_bench.json"))
 
@@ -480,7 +480,7 @@ def _ibl_frame_ratios():
 
 
 def _bins_markdown():
-    from thinfilm_jax.studies.small_sources import bins_markdown
+    from benchmarks.small_sources import bins_markdown
 
     return bins_markdown(artifact("improved_bins.json"))
 
@@ -532,13 +532,13 @@ def _bins_frontier_numbers():
 
 
 def _small_sources_markdown():
-    from thinfilm_jax.studies.small_sources import markdown
+    from benchmarks.small_sources import markdown
 
     return markdown(artifact("small_sources.json"))
 
 
 def _photo_markdown():
-    from thinfilm_jax.studies.photo_study import markdown
+    from benchmarks.photo_study import markdown
 
     return markdown(artifact("photo_study.json"))
 
@@ -711,7 +711,7 @@ def _evr_rows():
 
 
 def _peers_markdown():
-    from thinfilm_jax.studies.peers import peers_table
+    from benchmarks.peers import peers_table
 
     return peers_table(artifact("peers.json"))
 

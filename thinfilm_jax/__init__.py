@@ -13,7 +13,9 @@ colorimetry, glTF's iridescence) → `brdf` (normal distributions, masking, diff
 `Material`, patch quadrature) → `realtime` (K 29, the improved model, per-point kernels) →
 `shading` (uniform-light patch, environment maps, prefiltering, suns, the exact and
 real-time IBL) → `fit` (optimistix fits, thickness maps) → `interop` (glTF,
-OpenPBR) → `studies` (Figure 7, benchmarks, stability; nothing below imports it) → `cli`.
+OpenPBR, the text forms of indices and layers) → `render` (Figure 7, the scenes of
+`thinfilm-jax render`, figures without pyplot; nothing below imports it) → `cli`. The
+research studies and benchmarks live outside the package, in the repository's `benchmarks/`.
 
 Example (SPEC §4: the Fourier path K 4 converges to the exact spectral bands, which share its
 λ quadrature):

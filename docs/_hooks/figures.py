@@ -1,7 +1,7 @@
 """MkDocs hook: serve the repository's committed ``figures/`` as part of the site.
 
 The studies pages show the figures that the studies write into ``figures/`` at the repository
-root (``make figure7``, ``thinfilm-jax bench``, ...). Copying them into ``docs/`` would leave two
+root (``make figure7``, ``python -m benchmarks.bench``, ...). Copying them into ``docs/`` would leave two
 copies to keep in step, and a symbolic link does not survive every checkout, so this hook adds
 ``figures/**/*.png`` (and the ``.json`` result files, for download) to the site's files as
 if they lay in ``docs/figures/``. A page links them with a path relative to itself, e.g.

@@ -238,3 +238,20 @@ def test_fit_names_every_out_of_range_material_by_its_option(tmp_path):
         main(["fit", str(path)])
     msg = str(e.value.code)
     assert "initial.eta_film (water)" in msg and "initial.eta_base (Si)" in msg
+
+
+def test_bench_runs_the_clones_studies_or_says_where_they_are(tmp_path, monkeypatch, capsys):
+    """``thinfilm-jax bench ARGS`` is ``python -m benchmarks.bench ARGS`` of the clone (its
+    options, ``--help`` included); without a clone (an installed wheel, run elsewhere) it
+    exits 2 with one line naming the folder and the command, no traceback."""
+    import thinfilm_jax.cli.main as cli
+
+    with pytest.raises(SystemExit) as e:
+        cli.main(["bench", "--help"])
+    assert e.value.code == 0 and "python -m benchmarks.bench" in capsys.readouterr().out
+    monkeypatch.setattr(cli, "__file__", str(tmp_path / "site" / "thinfilm_jax" / "cli" /
+                                             "main.py"))
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["bench", "--quick"]) == 2
+    err = capsys.readouterr().err
+    assert "benchmarks/" in err and "pip install -e" in err and "Traceback" not in err

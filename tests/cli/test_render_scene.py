@@ -1,4 +1,4 @@
-"""`thinfilm-jax render` for one's own scene (`thinfilm_jax.studies.scene`): the sphere's files
+"""`thinfilm-jax render` for one's own scene (`thinfilm_jax.render.scene`): the sphere's files
 at the requested size, the NPZ's (H, W, 3) images, the default output folder, usage errors for
 a bad material and for a method that cannot model the material, and the soap bubble's
 physics: with d → 0 it shows the map straight through, R + T = 1 per band for the lossless
@@ -17,7 +17,7 @@ import pytest
 from thinfilm_jax.cli.main import main
 from thinfilm_jax.shading.envmap import load_envmap
 from thinfilm_jax.spectral.spectra import get_observer
-from thinfilm_jax.studies.scene import (SceneConfig, bubble_factors, shade_bubble, write_exr)
+from thinfilm_jax.render.scene import (SceneConfig, bubble_factors, shade_bubble, write_exr)
 
 
 def _read(path):
@@ -117,7 +117,7 @@ def test_each_scene_uses_the_options_it_takes(tmp_path, monkeypatch):
     """The other side of `OWN_SCENE_OPTIONS`: an option a scene takes changes the scene's
     `SceneConfig` (caught before rendering), so none is silently ignored."""
     from thinfilm_jax.cli.main import OWN_SCENE_OPTIONS
-    from thinfilm_jax.studies import scene as scene_mod
+    from thinfilm_jax.render import scene as scene_mod
 
     class Caught(Exception):
         pass
@@ -208,7 +208,7 @@ def test_bubble_conserves_energy_with_every_order():
     cfg = SceneConfig(scene="bubble", envmap=white, resolution=16, thickness_top=500.0,
                       thickness_bottom=500.0, orders=40)
     img, mask, _, _ = shade_bubble(cfg, load_envmap(white))
-    from thinfilm_jax.studies.scene import _frame
+    from thinfilm_jax.render.scene import _frame
 
     cos = _frame(cfg, load_envmap(white))[4]
     keep = mask & (cos >= 0.3)
@@ -223,7 +223,7 @@ def test_bubble_conserves_energy_with_every_order():
 def test_bubble_paths_stay_on_the_sphere_at_one_angle():
     """Every wall point of a pixel's path is on the unit sphere and met at the first wall's
     angle (a chord's two ends), the mirror direction is ω − 2⟨ω, n⟩n; measured 2e-16."""
-    from thinfilm_jax.studies.scene import bubble_paths, hit_sphere, pinhole
+    from thinfilm_jax.render.scene import bubble_paths, hit_sphere, pinhole
 
     eye, dirs = pinhole(12, 0.4, 20.0)
     mask, p, cos = hit_sphere(eye, dirs)
@@ -247,7 +247,7 @@ def test_render_json_is_what_was_rendered_and_renders_again(sky, tmp_path, scene
     names TiO₂ and its base, no bubble film; a bubble its film and thickness law, no
     sphere material) and `config_from_dict` of it renders the same images again (12 px)."""
     from thinfilm_jax import refractive_index
-    from thinfilm_jax.studies.scene import config_from_dict, make_material, render_scene
+    from thinfilm_jax.render.scene import config_from_dict, make_material, render_scene
 
     if scene == "sphere":
         cfg = SceneConfig(material=make_material(300.0, refractive_index("TiO2"), 2.0 + 0.5j),
@@ -284,7 +284,7 @@ def test_render_reports_warm_throughput_apart_from_prefiltering(sky, tmp_path, m
     import time
 
     import thinfilm_jax.shading.ibl as ibl
-    from thinfilm_jax.studies.scene import format_summary, render_scene, throughput_label
+    from thinfilm_jax.render.scene import format_summary, render_scene, throughput_label
 
     calls = []
     real = ibl.envmap_radiance

@@ -98,7 +98,7 @@ def test_fit_four_film_parameters(fig7_obs):
     """d, η₂, η₃, κ₃ together from RGB: recovered noise-free, but η₃ and κ₃ are almost
     interchangeable (corr ≈ −0.998, flagged as degenerate): with 1 % noise their standard
     errors are ~0.05 (measured), so only d and η₂ are well posed
-    (thinfilm_jax/studies/fit_study.py)."""
+    (benchmarks/fit_study.py)."""
     init = Film(350.0, 1.45, 1.7, 0.3)
     res = fit_film(fig7_obs, THETA, alpha=ALPHA, initial=init, free=FOUR)
     assert abs(float(res.film.thickness) - 600.0) <= TOL_D_PATCH

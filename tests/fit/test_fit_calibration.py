@@ -1,5 +1,5 @@
 """Are `fit_*` standard errors calibrated? (The fast in-suite check; the study over 200 films,
-views and α with the full search is `thinfilm_jax.studies.coverage`, README "Error bars".)
+views and α with the full search is `benchmarks.coverage`, README "Error bars".)
 
 Two checks of different kinds:
 

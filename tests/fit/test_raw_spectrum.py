@@ -224,7 +224,7 @@ def test_sigma_estimate_follows_the_noise():
 @pytest.mark.parametrize("name", ["042855.xy", "072523.xy"])
 def test_optifik_spectrum_within_ten_percent(name):
     """Two of manue_sample3's spectra (labels 1604 and 425 nm) divided by the set reference
-    (the median of the series' normalised spectra: studies.raw_spectra), 450–900 nm."""
+    (the median of the series' normalised spectra: benchmarks.raw_spectra), 450–900 nm."""
     import yaml
 
     folder = REAL / "manue_sample3"

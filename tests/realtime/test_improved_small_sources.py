@@ -1,5 +1,5 @@
 """`envmap_radiance(method="improved")` under a map of many small bright sources and no sun
-(docs/studies/improved.md, "Many small sources"; thinfilm_jax/studies/small_sources.py).
+(docs/studies/improved.md, "Many small sources"; benchmarks/small_sources.py).
 
 The map: `small_sources.lamps_map(seed=7, h=128, n=200)`, a dim night sky with 200 small
 lamps of many colours (1.4° texels, none split off as a source: each carries < 5 % of the
@@ -21,9 +21,9 @@ from thinfilm_jax.shading.ibl import DEFAULT_SOURCES, envmap_radiance
 from thinfilm_jax.shading.prefilter import prefilter_envmap
 from thinfilm_jax.spectral.colorimetry import delta_e2000
 from thinfilm_jax.spectral.spectra import DEFAULT_OBSERVER
-from thinfilm_jax.studies.render import _view_azimuth, camera, sphere
-from thinfilm_jax.studies.scene import exposure_of
-from thinfilm_jax.studies.small_sources import lamps_map, previous_improved
+from thinfilm_jax.render.study_scenes import view_azimuth, camera, sphere
+from thinfilm_jax.render.scene import exposure_of
+from benchmarks.small_sources import lamps_map, previous_improved
 
 FILM = Film(650.0, 1.3, 2.0, 0.5)
 ALPHA = 0.12
@@ -32,7 +32,7 @@ ALPHA = 0.12
 @pytest.fixture(scope="module")
 def lamps():
     env = lamps_map(7, h=128, n=200)
-    wo, right, up = camera(_view_azimuth(env), 15.0)
+    wo, right, up = camera(view_azimuth(env), 15.0)
     mask, n = sphere(12, wo, right, up)
     pts = n[mask]
     ref = np.asarray(envmap_radiance(FILM, ALPHA, pts, wo, env))

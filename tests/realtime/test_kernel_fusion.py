@@ -5,7 +5,7 @@ kernels on 65,536 abstract points (`jax.ShapeDtypeStruct`: nothing is evaluated)
 kernels were written for fusion (explicit real-part arithmetic, flat LUT indices, no
 contraction or reduction), XLA:CPU materialised their intermediates between ~35 loops:
 3,300 bytes accessed per point for `filtered_kernel` and 3,052 for `ideal_kernel`, with 19
-and 17 transcendentals (`thinfilm_jax.studies.kernel_bench` measures both versions).
+and 17 transcendentals (`benchmarks.kernel_bench` measures both versions).
 The bounds pin what the kernels achieve (jax 0.10.2 on x86-64) with a 10 % margin; a kernel
 that falls back to unfused loops (a contraction, a reduction or a stacked polarisation axis)
 exceeds them.

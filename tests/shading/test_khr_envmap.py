@@ -260,20 +260,20 @@ def test_map_with_suns_shades_them(maps):
 
 
 def test_render_column_in_the_render_observers_bands(maps, batch):
-    """`thinfilm-jax render --method khr` (`studies.render`): the column shades under a
+    """`thinfilm-jax render --method khr` (`render.study_scenes`): the column shades under a
     render observer other than the default and its values are that observer's bands, as
     every method's: the default observer's output taken back to RGB (`bands_to_rec709`) and
     to the render observer's bands (`rec709_to_bands`) is the same; a flat reflectance's RGB
     (R, R, R) maps to bands (R, R, R) in both observers (the map's white, equal-energy light,
     is the bands' white). `render_one` itself is not run here: its sharded compilation and a
     second observer's prefilter cost ~20 s on this machine."""
-    from thinfilm_jax.studies.render import _shade
+    from thinfilm_jax.render.study_scenes import shade_block
 
     for obs in ("stiles_burch_1959_10", "cie_1931_2"):
         np.testing.assert_allclose(rec709_to_bands(np.full((2, 3), 0.3), obs), 0.3, atol=1e-12)
     film, alpha, theta, view, _ = batch
     normal = np.broadcast_to(N, view.shape)
-    got = _shade(film, normal, alpha, view, maps["white"], method="khr",
+    got = shade_block(film, normal, alpha, view, maps["white"], method="khr",
                  observer="cie_1931_2", options=ModelOptions(), subdivisions=None)
     default = envmap_radiance(film, alpha, N, view, maps["white"], method="khr")
     want = rec709_to_bands(bands_to_rec709(np.asarray(default)), "cie_1931_2")

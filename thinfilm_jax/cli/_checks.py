@@ -37,7 +37,7 @@ NUMERIC = {
     "thickness_range": (0.0, None, False, float),
 }
 #: sub-commands whose --out is a folder
-FOLDER_OUT = ("figure7", "bench", "render", "fit-map")
+FOLDER_OUT = ("figure7", "render", "fit-map")
 
 
 def _enable_x64():

@@ -25,7 +25,7 @@ def save_thickness_png(path: Path, d: np.ndarray, title: str, ambiguous=None) ->
     """The thickness map `d` (nm) as a PNG with a colour bar, pixels flagged in `ambiguous`
     hatched (`fit-map` of an image and of a photograph), written atomically."""
     from ..core._io import atomic_write
-    from ..studies import _plot as plt  # the caller's backend untouched
+    from ..render import plot as plt  # the caller's backend untouched
 
     h, w = d.shape
     fig, ax = plt.subplots(figsize=(5.4, 4.4 * h / max(w, 1) + 0.7))

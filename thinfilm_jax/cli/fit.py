@@ -94,6 +94,8 @@ import os
 import re
 from pathlib import Path
 
+from ..interop.index_text import parse_index, parse_layers  # the one parser (fit, render)
+
 #: Help text for the ``fit`` sub-command (argparse, RawDescriptionHelpFormatter).
 FIT_HELP = """\
 Fit film thickness, IORs and roughness to observations read from CSV or JSON and write the
@@ -348,78 +350,6 @@ def _in_range(path, name, a, lo, hi, unit=""):
     bad = (a < lo) | (a > hi)
     if np.any(bad):
         _fail(path, f"{name} = {float(a[bad].flat[0])!r} lies outside [{lo}, {hi}]{unit}")
-
-
-def parse_index(source):
-    """An index from the command line or a settings file (SPEC §12): a number stays a number
-    (real, or complex such as ``3.9+0.02j``); a string that is not a number is a bundled
-    material name or the path of a refractiveindex.info YAML / CSV file
-    (`thinfilm_jax.optics.materials.refractive_index`). ValueError (listing the bundled
-    names) for anything else.
-
-    Example:
-        >>> parse_index("1.46"), parse_index(2), parse_index("3.9+0.02j")
-        (1.46, 2.0, (3.9+0.02j))
-        >>> parse_index("SiO2").name
-        'SiO2'
-    """
-    if isinstance(source, bool) or source is None:
-        raise ValueError(f"an index must be a number, a material name or a file, got "
-                         f"{source!r}")
-    if isinstance(source, int | float):
-        v = float(source)
-    else:
-        text = str(source).strip()
-        try:
-            v = float(text)
-        except ValueError:
-            try:
-                v = complex(text)
-            except ValueError:
-                from ..optics.materials import refractive_index
-
-                try:
-                    return refractive_index(text)
-                except ValueError as e:
-                    raise ValueError(str(e).removeprefix("refractive_index: ")) from None
-    if not (math.isfinite(v.real) and math.isfinite(v.imag)):
-        raise ValueError(f"an index must be finite, got {source!r}")
-    return v
-
-
-def parse_layers(source) -> list[tuple[str, float]]:
-    """A layer list ``"SiO2:250,Si3N4:80"`` (or a list of ``"material:nm"`` strings) →
-    [(material, thickness_nm)], layer 0 first; each material is checked (`parse_index`).
-    ValueError naming the malformed entry.
-
-    Example:
-        >>> parse_layers("SiO2:250, Si3N4:80")
-        [('SiO2', 250.0), ('Si3N4', 80.0)]
-    """
-    items = source.split(",") if isinstance(source, str) else source
-    if not isinstance(items, list | tuple) or not items:
-        raise ValueError(f"layers must be 'material:thickness_nm,...' (layer 0 first), got "
-                         f"{source!r}")
-    out = []
-    for i, item in enumerate(items):
-        text = str(item).strip()
-        if ":" not in text:
-            raise ValueError(f"layer {i} {text!r} is not 'material:thickness_nm' (e.g. "
-                             f"'SiO2:250')")
-        mat, d = (t.strip() for t in text.rsplit(":", 1))
-        try:
-            nm = float(d)
-        except ValueError:
-            raise ValueError(f"layer {i} {text!r}: thickness {d!r} is not a number (nm)") \
-                from None
-        if not (math.isfinite(nm) and nm >= 0):
-            raise ValueError(f"layer {i} {text!r}: thickness must be finite and >= 0 nm")
-        try:
-            parse_index(mat)
-        except ValueError as e:
-            raise ValueError(f"layer {i} {text!r}: {e}") from None
-        out.append((mat, nm))
-    return out
 
 
 def _index_setting(path, where, value):

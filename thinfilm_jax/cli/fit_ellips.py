@@ -8,7 +8,7 @@ them, weight the fit (reduced χ² = WVASE's MSE²). The material is a stack (``
 MAT:NM,...``, layer 0 facing the ambient first) or one film (``--eta-film MAT --thickness
 NM``) on ``--eta-base MAT`` under ``--eta-outer`` (default 1); a material is a number, a
 bundled name (SiO2, Si, ...) or a table / refractiveindex.info file (the parsers of
-``thinfilm-jax fit``, `thinfilm_jax.cli.fit.parse_index`, `parse_layers`).
+``thinfilm-jax fit``, `thinfilm_jax.interop.index_text.parse_index`, `parse_layers`).
 ``--interpolation epsilon`` interpolates every table in ε = (n + iκ)², WVASE's rule
 (`thinfilm_jax.optics.index.TabulatedIndex`); ``--wavelength-unit um`` reads a table whose
 header says only ``Wavelength`` (refellips' air.csv).
@@ -79,7 +79,7 @@ def _material(args):
     from ..core.stack import Stack
     from ..optics.index import TabulatedIndex
     from ..optics.materials import read_csv
-    from .fit import parse_index, parse_layers
+    from ..interop.index_text import parse_index, parse_layers
 
     def index(text, option):
         path = Path(str(text))

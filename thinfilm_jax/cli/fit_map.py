@@ -79,7 +79,7 @@ def _index_arg(lo: float, lo_open: bool):
     """argparse type of an index option: a number in range or a material (`IndexArg`)."""
     import argparse
 
-    from .fit import parse_index
+    from ..interop.index_text import parse_index
 
     def parse(text: str) -> IndexArg:
         try:

@@ -1,5 +1,8 @@
-"""Command line: ``thinfilm-jax figure7 | bench | render | fit | fit-map | fit-ellips`` (also
-``python -m thinfilm_jax``)."""
+"""Command line: ``thinfilm-jax figure7 | render | fit | fit-map | fit-ellips | bench`` (also
+``python -m thinfilm_jax``). The research studies and benchmarks are not in the installed
+package: they live in the repository's ``benchmarks/`` folder (``python -m benchmarks.bench``
+from a clone, ``make bench``); ``thinfilm-jax bench`` hands its arguments to that command when
+it finds the clone (`_bench`), and says so when it does not."""
 
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ from ._checks import _add_device_options, _devices, _enable_x64
 def _figure7(args) -> int:
     devices = _devices(args)
     _enable_x64()
-    from ..studies.figure7 import Figure7Config, run_figure7
+    from ..render.figure7 import Figure7Config, run_figure7
 
     fields = {f.name for f in dataclasses.fields(Figure7Config)}
     cfg = Figure7Config(**{k: tuple(v) if isinstance(v, list) else v
@@ -29,42 +32,35 @@ def _figure7(args) -> int:
     return 0
 
 
-def _bench(args) -> int:
-    _enable_x64()
-    if args.suite in ("core", "all"):
-        from ..studies.bench import run_bench
+def find_benchmarks():
+    """The `benchmarks` package of the clone this library runs from (an editable install:
+    the folder beside `thinfilm_jax/`) or of the current folder; ImportError saying where the
+    studies live when neither has it (an installed wheel holds no studies)."""
+    import importlib
+    from pathlib import Path
 
-        run_bench(out=args.out, quick=args.quick)
-    if args.suite in ("ibl", "all"):
-        from ..studies.ibl_bench import run_ibl_bench
+    for root in (Path(__file__).resolve().parents[2], Path.cwd()):
+        if (root / "benchmarks" / "__init__.py").is_file():
+            if str(root) not in sys.path:
+                sys.path.insert(0, str(root))
+            return importlib.import_module("benchmarks")
+    raise ImportError("thinfilm-jax bench runs the studies of the repository's benchmarks/ "
+                      "folder, which the installed package does not hold: from a clone, "
+                      "`pip install -e '.[bench,plots]'` and `python -m benchmarks.bench`")
 
-        run_ibl_bench(out=args.out, quick=args.quick)
-    if args.suite in ("scaling", "all"):
-        from ..studies.scaling import QUICK, ScalingConfig, format_table, run_scaling
 
-        cfg = ScalingConfig(**(QUICK if args.quick else {}))
-        print(format_table(run_scaling(cfg, out_dir=args.out)))
-    if args.suite in ("improved", "all"):
-        from ..studies.improved_study import StudyConfig, run
+def _bench(argv: list[str]) -> int:
+    """``thinfilm-jax bench ARGS``: ``python -m benchmarks.bench ARGS`` of the clone (its
+    options are its own, ``--help`` included); exit status 2 and one line when there is no
+    clone to run."""
+    try:
+        find_benchmarks()
+    except ImportError as e:
+        print(f"thinfilm-jax bench: error: {e}", file=sys.stderr)
+        return 2
+    from benchmarks.bench import main as bench_main
 
-        run(StudyConfig.quick() if args.quick else StudyConfig(), out=args.out)
-    if args.suite in ("models", "all"):
-        from ..studies.models_bench import run_models_bench
-
-        run_models_bench(out=args.out, quick=args.quick)
-    if args.suite in ("colour_table", "all"):
-        from ..studies.colour_table_study import run_colour_table_study
-
-        run_colour_table_study(out=args.out, quick=args.quick)
-    if args.suite in ("materials", "all"):
-        from ..studies import materials_study as ms
-
-        ms.run(ms.MaterialsConfig.tiny() if args.quick else ms.MaterialsConfig(), out=args.out)
-    if args.suite in ("photo", "all"):
-        from ..studies import photo_study
-
-        photo_study.run(out=args.out, quick=args.quick)
-    return 0
+    return bench_main(argv)
 
 
 # the own scenes' options: argparse destination and the scenes that take each (the study
@@ -90,9 +86,9 @@ def _given(args, options) -> list[str]:
 
 
 def _render(args) -> int:
-    """`thinfilm-jax render`: one's own scene (sphere, bubble; `studies.scene`) or the study
-    scenes (`studies.render`). Options that do not fit the scene are usage errors."""
-    from ..studies.scene import OWN_SCENES, default_out_dir
+    """`thinfilm-jax render`: one's own scene (sphere, bubble; `render.scene`) or the study
+    scenes (`render.study_scenes`). Options that do not fit the scene are usage errors."""
+    from ..render.scene import OWN_SCENES, default_out_dir
 
     scenes = args.scene or ["sphere"]
     own = [s for s in scenes if s in OWN_SCENES]
@@ -111,7 +107,7 @@ def _render(args) -> int:
         return _render_scene(args, own[0], out, fail)
     from pathlib import Path
 
-    from ..studies.render import RenderConfig, run_render, summary_table
+    from ..render.study_scenes import RenderConfig, run_render, summary_table
 
     kw = {k: tuple(v) for k, v in (("envmaps", args.envmap), ("scenes", scenes),
                                    ("methods", args.method), ("alphas", args.alphas)) if v}
@@ -128,10 +124,10 @@ def _render(args) -> int:
 
 
 def _render_scene(args, scene: str, out: str, fail) -> int:
-    """--scene sphere | bubble (`studies.scene.render_scene`)."""
+    """--scene sphere | bubble (`render.scene.render_scene`)."""
     from pathlib import Path
 
-    from ..studies.scene import SceneConfig, format_summary, make_material, render_scene
+    from ..render.scene import SceneConfig, format_summary, make_material, render_scene
 
     if args.envmap and len(args.envmap) > 1:
         fail(f"--scene {scene} renders under one map; got {len(args.envmap)} --envmap")
@@ -189,12 +185,13 @@ def _fit(args) -> int:
 
 
 def _index_arg(option: str):
-    """argparse type of an index option: a usage error (exit 2) names the bundled materials."""
+    """argparse type of an index option (`interop.index_text.parse_index`): a usage error
+    (exit 2) names the bundled materials."""
     def parse(text):
-        from ..studies.scene import parse_index
+        from ..interop.index_text import parse_index
 
         try:
-            return parse_index(text, option)
+            return parse_index(text)
         except ValueError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
 
@@ -203,82 +200,20 @@ def _index_arg(option: str):
 
 
 def _layers_arg(text):
-    """argparse type of --layers (`studies.scene.parse_layers`)."""
-    from ..studies.scene import parse_layers
+    """argparse type of --layers: [(index, thickness nm)] (`interop.index_text.parse_layers`)."""
+    from ..interop.index_text import parse_layers
 
     try:
-        return parse_layers(text)
+        return parse_layers(text, indices=True)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``thinfilm-jax`` parser; a sub-command's unset options stay None (the study's defaults
-    apply, SPEC §7).
-
-    Example:
-        >>> args = build_parser().parse_args(["figure7", "--resolution", "32"])
-        >>> args.command, args.resolution, args.out, args.thickness
-        ('figure7', 32, 'figures', None)
-    """
-    from .. import __version__
-
-    p = argparse.ArgumentParser(prog="thinfilm-jax", description=__doc__)
-    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
-
-    f7 = sub.add_parser("figure7", help="reproduce Figure 7 of Kneiphof et al. 2019",
-                        description="Render the eight panels (a)-(h) and the ΔE error maps into "
-                                    "--out (figure7.png, figure7_error.png, figure7.json, "
-                                    "figure7.npz). Defaults follow SPEC §7.")
-    f7.add_argument("--out", default="figures", help="output folder (default: figures)")
-    f7.add_argument("--resolution", type=int, help="pixels per panel side (default 64; paper 256)")
-    f7.add_argument("--eta-film", dest="eta_film", type=float, help="film IOR η₂ (1.3)")
-    f7.add_argument("--eta-base", dest="eta_base", type=float, help="base IOR η₃ (2.0)")
-    f7.add_argument("--kappa-base", dest="kappa_base", type=float, help="base κ₃ (0.5)")
-    f7.add_argument("--thickness", type=float, help="film thickness of row (a)-(d), nm (600)")
-    f7.add_argument("--alpha", type=float, help="GGX α of row (e)-(h) (0.25)")
-    f7.add_argument("--thickness-max", dest="thickness_max", type=float,
-                    help="largest thickness of row (e)-(h), nm (1000)")
-    f7.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"])
-    f7.add_argument("--terms", type=int, help="Fourier orders M of the real-time methods (2)")
-    f7.add_argument("--quadrature", type=int, nargs=2, metavar=("N_U", "N_PHI"),
-                    help="half-vector quadrature orders (n_u, n_phi) (32 32)")
-    f7.add_argument("--shat", choices=["exact", "lut", "gaussian"],
-                    help="filtered Ŝ source of K 29 (exact)")
-    f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")
-    f7.add_argument("--quiet", action="store_true", help="no progress bar")
-    f7.add_argument("--timing", metavar="PATH", help="also write the run's times, device and "
-                    "load average to PATH as JSON (`make bench`: figures/figure7_timing.json); "
-                    "--out holds the results only, the same on every run")
-    _add_device_options(f7)
-    f7.set_defaults(func=_figure7)
-
-    b = sub.add_parser("bench", help="error against run time of every method and peers",
-                       description="Time every evaluation path (compile time separate from warm "
-                                   "run time) and measure its error; print a table, write JSON.")
-    b.add_argument("--out", default="figures", help="output folder (default: figures)")
-    b.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
-    b.add_argument("--suite", choices=["core", "ibl", "scaling", "improved", "models",
-                                       "colour_table", "materials", "photo", "all"],
-                   default="core",
-                   help="core: error vs run time, peers, specialisation (default); ibl: the "
-                        "2560×1440 IBL frame and the real-time options' errors; scaling: the "
-                        "large jobs on 1, 2 and 4 devices (subprocesses); improved: "
-                        "method='improved' against filtered (regions, IBL renders, "
-                        "kernel cost, Pareto); models: the classic lobes with a thin film, "
-                        "Schlick tint and the film methods against the exact film "
-                        "(figures/models.*); colour_table: Kneiphof & Klein 2022's prefiltered "
-                        "colour table against filtered, improved and the reference per map "
-                        "(figures/colour_table.*); materials: colour charts of films on "
-                        "silicon, constant vs dispersive Si, the real-time methods on "
-                        "dispersive films (figures/materials.*); photo: thickness maps from "
-                        "synthetic photographs and fit_spectrum against optifik "
-                        "(figures/photo_study.*); all: the eight")
-    b.set_defaults(func=_bench)
-
+def _add_render_parser(sub) -> None:
+    """The ``render`` sub-command: one's own scene (`render.scene`) or the study scenes
+    (`render.study_scenes`)."""
     from ..shading.envmap import SHIPPED
-    from ..studies.render import METHODS as RENDER_METHODS
+    from ..render.study_scenes import METHODS as RENDER_METHODS
 
     rd = sub.add_parser("render", help="a film or stack on a sphere, a soap bubble, or the "
                         "study scenes (Kneiphof Figs. 3-6), under an environment map",
@@ -354,6 +289,54 @@ def build_parser() -> argparse.ArgumentParser:
     _add_device_options(rd)
     rd.set_defaults(func=_render, render_parser=rd)
 
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``thinfilm-jax`` parser; a sub-command's unset options stay None (the study's defaults
+    apply, SPEC §7).
+
+    Example:
+        >>> args = build_parser().parse_args(["figure7", "--resolution", "32"])
+        >>> args.command, args.resolution, args.out, args.thickness
+        ('figure7', 32, 'figures', None)
+    """
+    from .. import __version__
+
+    p = argparse.ArgumentParser(prog="thinfilm-jax", description=__doc__)
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    f7 = sub.add_parser("figure7", help="reproduce Figure 7 of Kneiphof et al. 2019",
+                        description="Render the eight panels (a)-(h) and the ΔE error maps into "
+                                    "--out (figure7.png, figure7_error.png, figure7.json, "
+                                    "figure7.npz). Defaults follow SPEC §7.")
+    f7.add_argument("--out", default="figures", help="output folder (default: figures)")
+    f7.add_argument("--resolution", type=int, help="pixels per panel side (default 64; paper 256)")
+    f7.add_argument("--eta-film", dest="eta_film", type=float, help="film IOR η₂ (1.3)")
+    f7.add_argument("--eta-base", dest="eta_base", type=float, help="base IOR η₃ (2.0)")
+    f7.add_argument("--kappa-base", dest="kappa_base", type=float, help="base κ₃ (0.5)")
+    f7.add_argument("--thickness", type=float, help="film thickness of row (a)-(d), nm (600)")
+    f7.add_argument("--alpha", type=float, help="GGX α of row (e)-(h) (0.25)")
+    f7.add_argument("--thickness-max", dest="thickness_max", type=float,
+                    help="largest thickness of row (e)-(h), nm (1000)")
+    f7.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"])
+    f7.add_argument("--terms", type=int, help="Fourier orders M of the real-time methods (2)")
+    f7.add_argument("--quadrature", type=int, nargs=2, metavar=("N_U", "N_PHI"),
+                    help="half-vector quadrature orders (n_u, n_phi) (32 32)")
+    f7.add_argument("--shat", choices=["exact", "lut", "gaussian"],
+                    help="filtered Ŝ source of K 29 (exact)")
+    f7.add_argument("--exposure", type=float, help="display exposure for all panels (2.0)")
+    f7.add_argument("--quiet", action="store_true", help="no progress bar")
+    f7.add_argument("--timing", metavar="PATH", help="also write the run's times, device and "
+                    "load average to PATH as JSON (`make bench`: figures/figure7_timing.json); "
+                    "--out holds the results only, the same on every run")
+    _add_device_options(f7)
+    f7.set_defaults(func=_figure7)
+
+    _add_render_parser(sub)
+    # listed for --help; `main` hands everything after "bench" to the clone's command
+    sub.add_parser("bench", add_help=False, help="the studies of a clone's benchmarks/ folder "
+                   "(python -m benchmarks.bench; --help lists its options)")
+
     from . import fit as fit_cli
 
     ft = sub.add_parser("fit", help="fit film parameters to observed patch colours or spectra",
@@ -374,6 +357,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     from ._checks import check_args, run_command
 
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["bench"]:
+        return _bench(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     check_args(parser, args)  # out-of-range options: usage error before any work

@@ -53,7 +53,7 @@ stages:
    missed 3 of 80 noise-free films of the calibration set (d 150–1200 nm, η₂ 1.2–1.7, six
    views 0–70°, one initial guess d = 500 nm, η₂ = 1.4): each landed one order too thick
    with η₂ nearly right (d 805 → 1003, 1170 → 1370, 981 → 1171 nm); with this stage all
-   three are found (`python -m thinfilm_jax.studies.coverage`). When η₂ is free the same
+   three are found (`python -m benchmarks.coverage`). When η₂ is free the same
    round also starts on the d–η₂ ridge: η₂ · (1 ± 0.08), (1 ± 0.16) at the same optical
    thickness η₂ d and ± one order (the data fix η₂ d far better than η₂).
 3. *polish*: the 1 + `n_alternatives` (3) best *distinct* minima (thickness more than a

@@ -87,7 +87,7 @@ def order_flags(e_d, d_grid, d, loss, valid, box, n_bands, p):
     The robust reduced χ² is the median pixel's χ² over the median of χ²_{J−p} (robust to a
     few outlying pixels). On an exact rendering of a sphere under a map (24², venice_sunset,
     α = 0.25, d = 450 nm) fitted with `filtered`, 30 % of pixels land in a wrong order, at the
-    rim, and these rules flag 92 % of them (`studies.fit_map_mismatch`).
+    rim, and these rules flag 92 % of them (`benchmarks.fit_map_mismatch`).
     """
     from scipy.stats import chi2
 

@@ -83,7 +83,7 @@ def _screen(res_screen, y_starts, grid, n_solves, args, batching):
     Candidates are ranked by the loss *profiled over a brightness gain*,
     min_g ½|g m − o|² with g ∈ [0.5, 2] (closed form): the starts' α and η₂ are guesses that
     scale the patch's brightness more than they move its fringes, and the plain loss ranks
-    the right fringe order below brighter wrong ones (`studies.coverage`: two of 200 noisy fits,
+    the right fringe order below brighter wrong ones (`benchmarks.coverage`: two of 200 noisy fits,
     d ≈ 930 and 1070 nm, were found only this way). The returned losses are the plain ones.
     """
     a = jax.lax.stop_gradient(args)
@@ -221,7 +221,7 @@ def order_moves(spec, base, cos_outer, lam, n_orders):
     The order moves change only that thickness. The ridge moves (η₂ free) set η₂' = η₂ ·
     (1 ± 0.08), (1 ± 0.16) and the thickness that keeps the optical thickness η₂ d, and that
     ± one order: the data fix η₂ d far better than η₂ (a wrong η₂ at the right η₂ d fits
-    nearly as well: `studies.coverage`, film d = 1090 nm, η₂ = 1.31 fitted as 1163 nm, 1.23
+    nearly as well: `benchmarks.coverage`, film d = 1090 nm, η₂ = 1.31 fitted as 1163 nm, 1.23
     from four views), and the short solves from one (d, η₂) pair do not cross the barriers
     between such minima. None when no thickness is free.
     """

@@ -360,7 +360,7 @@ class FitResult(NamedTuple):
         parameters give q = 2.26 at 95 %, where ±2 SE covers 92.3 %). Pass
         ``absolute_sigma=True`` when the fit used ``FitOptions(absolute_sigma=True)`` (σ
         known): then q is the normal quantile. Measured calibration (1 % noise, 200 films):
-        README "The global minimum and honest error bars", `studies.coverage`.
+        README "The global minimum and honest error bars", `benchmarks.coverage`.
         Local to this minimum: see `ambiguous` for other fringe orders. A raw-spectrum fit
         (`envelope`) also counts its eliminated linear parameters: n − p − 2(k + 1) per
         spectrum.

@@ -1,7 +1,8 @@
-"""Exchange with other formats, the layer after `fit` and before `studies`: a `Film` to and
+"""Exchange with other formats, the layer after `fit` and before `render`: a `Film` to and
 from a glTF 2.0 material with `KHR_materials_iridescence` and its thickness texture (`gltf`),
-and OpenPBR Surface's `thin_film_*` parameters (`openpbr`). Imports `core`, `optics`,
-`spectral`.
+OpenPBR Surface's `thin_film_*` parameters (`openpbr`), and indices and layer stacks written
+as text (`index_text`: the one parser of the command line and the settings files). Imports
+`core`, `optics`, `spectral`.
 
 Example (glTF nm and OpenPBR µm describe the same film):
     >>> from thinfilm_jax import Film

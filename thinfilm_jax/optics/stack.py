@@ -55,7 +55,7 @@ on a leading axis) as one complex elementwise program, the division written on (
 parts. Measured on 64 angles × 100 wavelengths, float64, 2 CPU cores: R of 8 / 16 / 80
 layers in 0.4 / 0.8 / 3.8 ms warm, compiled in 0.8 / 1.3 / ~2 s; the unrolled Python loop
 (``layers="loop"``) compiles in 1.6 / 3.4 s at 8 / 16 layers (growing with N) and runs
-3× slower warm. `thinfilm_jax/studies/stack_bench.py` times it against its peers.
+3× slower warm. `benchmarks/stack_bench.py` times it against its peers.
 
 Example (a quarter-wave MgF₂ layer on glass at 550 nm, normal incidence:
 R = ((n_s − n²)/(n_s + n²))² = 0.0126):

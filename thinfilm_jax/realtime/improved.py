@@ -93,14 +93,14 @@ bin_radiance_parts`); narrower kernels follow each bin's part of the lobe more c
 g = 3 every render of the small-sources study is within ≤ 3 ΔE₀₀ and ≤ 0.56× `filtered`, at
 2× the default's cost (docs/studies/improved.md, "Choosing K").
 
-Before (`prefilter.bin_radiance`, `studies.small_sources.previous_improved`) each bin read
+Before (`prefilter.bin_radiance`, `benchmarks.small_sources.previous_improved`) each bin read
 its moment-matched part of the lobe at its uniform-light cosine: under maps of many small
-bright sources and no sun (`studies.small_sources`) it lost its advantage over `filtered`
+bright sources and no sun (`benchmarks.small_sources`) it lost its advantage over `filtered`
 (0.67–1.35× its mean ΔE₀₀), and the cause is both neglected terms: with each bin's exact
 light, uniform-light cosines give 2.5–3.8 ΔE₀₀ and light-weighted ones 0.7–1.1
 (docs/studies/improved.md, "Many small sources").
 
-Measured (`studies.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
+Measured (`benchmarks.improved_study`, float32 kernels, a loaded 2-core CPU): uniform light
 0.30 / 0.28 × `filtered`'s ΔE mean / p95 on a wide grid, 0.11–0.38 on the Figure 7 grids,
 at 1.17× its cost per shading point (before the fused kernels; figures/kernel_bench.md now
 has 1.65×); sphere renders under the four shipped maps 0.22 / 0.21 × (with the suns

@@ -13,7 +13,7 @@ within 1.9e-4 of the exhaustive rule at twelve α from 0.03 to 1 on the shipped 
 
 The exhaustive rule (every texel with s × s nodes, the reference before the adaptive one) stays
 reachable as `exact_radiance(..., exhaustive=True)`: tests/shading/test_ibl_reference.py
-compares the two and `thinfilm_jax.studies.ibl_bench` times both in one run.
+compares the two and `benchmarks.ibl_bench` times both in one run.
 
 Points are shaded in `jax.lax.map` steps (the exhaustive rule: one point per step, its
 intermediates, H W s² × 9 doubles, near the cache; the adaptive rule: up to 16 points per

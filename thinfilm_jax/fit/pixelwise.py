@@ -161,6 +161,56 @@ def choose(cand_d, cand_chi, where, valid, tau, sweeps):
                sweeps).ravel()[where]
 
 
+def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
+    r"""Stage 2 without a prior's τ: the fringe orders by continuation from the pixels whose
+    order the data decide (quality-guided path following, as in phase unwrapping: Herráez et
+    al. 2002, Appl. Opt. 41, 7437). A pixel's candidates within its tolerance of its lowest
+    χ² (χ²_pk − min_k χ²_pk < `tol`_p (n,): orders the pixel does not exclude) are its
+    *plausible* ones; a pixel with one plausible order (no other ≥ `distinct` nm away), or
+    one of `known` thickness (n,) (NaN elsewhere: the pads, at that thickness; the caller
+    sets it), is a seed. The film is continuous, so the decided
+    region grows by fronts: each undecided pixel with decided 4-neighbours takes, of its
+    plausible candidates, the one nearest their mean thickness. Pixels no front reaches
+    (no seed in their connected region) keep their lowest χ². Candidates (n, K), χ² (n, K),
+    the n pixels at the flat indices `where` of `valid` (H, W); returns indices (n,).
+
+    Example (the middle pixel alone prefers 300 nm, but 100 nm is within its tolerance and
+    continues its decided neighbours):
+        >>> import numpy as np
+        >>> d = np.array([[100.0, 300.0]] * 3); chi = np.array([[0.0, 50.0], [0.1, 0.0],
+        ...                                                    [0.0, 50.0]])
+        >>> grow(d, chi, np.arange(3), np.ones((1, 3), bool), np.full(3, 4.0)).tolist()
+        [0, 0, 0]
+    """
+    n, k = cand_d.shape
+    rows = np.arange(n)
+    best = np.argmin(cand_chi, axis=-1)
+    d_best = cand_d[rows, best]
+    plausible = (cand_chi - cand_chi[rows, best][:, None]) < np.asarray(tol)[:, None]
+    plausible[rows, best] = True
+    other = plausible & (np.abs(cand_d - d_best[:, None]) >= distinct)
+    seed = ~np.any(other, axis=-1)
+    if known is not None:
+        seed |= np.isfinite(known)
+        d_best = np.where(np.isfinite(known), known, d_best)
+    h, w = valid.shape
+    img = lambda fill, v: np.full((h * w,) + np.shape(v)[1:], fill, np.result_type(v))
+    cand, ok = img(0.0, cand_d), img(False, plausible)
+    cand[where], ok[where] = cand_d, plausible
+    idx, cur, done = img(0, best), img(0.0, d_best), img(False, seed)
+    idx[where], cur[where], done[where] = best, d_best, seed
+    reach = valid.ravel()
+    while True:
+        nb, nb_ok = (a.reshape(h * w, 4) for a in neighbours(cur.reshape(h, w),
+                                                             done.reshape(h, w)))
+        front = np.flatnonzero(reach & ~done & nb_ok.any(axis=-1))
+        if front.size == 0:
+            return idx[where]
+        mean = np.sum(nb[front] * nb_ok[front], -1) / np.sum(nb_ok[front], -1)
+        j = np.argmin(np.where(ok[front], np.abs(cand[front] - mean[:, None]), np.inf), -1)
+        idx[front], cur[front], done[front] = j, cand[front, j], True
+
+
 def alternative(cand_d, cand_chi, d_best, distinct):
     """Stage 4: each pixel's best other candidate at least `distinct` nm from its thickness
     (another fringe order): (its thickness (n,), whether there is one (n,))."""

@@ -118,7 +118,8 @@ _CANDIDATES = 4  # local minima per pixel kept for the neighbour prior
 _ICM_SWEEPS = 6  # sweeps of the neighbour prior over the candidates
 _MODEL_FLOOR = 0.005  # relative model uncertainty (camera, light, material known so well)
 _JPEG_FLOOR = 0.02  # … of a lossy JPEG, in the misfit statistics (quality 75–95: robust χ²
-_JPEG_CLIP_CODES = 6  # 0.8–2.4 with it); codes this close to 0 or 255: a clipped channel
+_JPEG_BLACK_CODES = 6  # 0.8–2.4 with it); codes ≤ this of a JPEG channel are black-clipped
+_JPEG_CEILING_CODES = 16  # codes ≥ 255 − this: clipped at full scale, rung down (Gibbs)
 _JPEG_SUFFIXES = (".jpg", ".jpeg")
 _CHI2_2_MEDIAN = 2.0 * np.log(2.0)  # the median of χ² with 2 degrees of freedom
 _GAIN_PIXELS = 16384  # pixels of the gain alternation (and every pad pixel)
@@ -206,16 +207,17 @@ def _censoring(photo: Photo, lossy: bool) -> tuple[np.ndarray, tuple[float, floa
     """((H, W, 3) per channel: 0 a reading, 1 clipped at black, 2 clipped at full scale (for
     integer or sRGB-encoded sources; linear float data have no ceiling); the clip levels
     (b, c)). b = 0 and c = 1, except for a lossy (JPEG) file, whose DCT rings a clipped
-    channel by a few codes away from its clip, up from black and down from full scale (the
-    Gibbs overshoot of the 8 × 8 blocks' quantised cosines): b is the linear value of
-    `_JPEG_CLIP_CODES` / 255 there and c that of 1 − `_JPEG_CLIP_CODES` / 255. A channel
-    beyond a level is a censored observation (the truth is beyond the level, by how much
-    unknown: `photo_screen.residual`), not a reading."""
+    channel away from its clip (the Gibbs overshoot of the 8 × 8 blocks' quantised cosines,
+    widened by the chroma subsampling: up to ~25 codes at a saturated colour's edge, ~8 in
+    the soap film's over-exposed fringes, docs/studies/photographs.md): b is the linear
+    value of `_JPEG_BLACK_CODES` / 255 there and c that of (255 − `_JPEG_CEILING_CODES`) /
+    255. A channel beyond a level is a censored observation, the truth beyond the level by
+    an unknown amount (`photo_screen.residual`), not a reading."""
     v = photo.linear
     black, ceiling = 0.0, 1.0
     if lossy:
-        code = _JPEG_CLIP_CODES / 255.0
-        black, ceiling = (float(_decode(c, photo.encoding)) for c in (code, 1.0 - code))
+        black, ceiling = (_decode(c / 255.0, photo.encoding)
+                          for c in (_JPEG_BLACK_CODES, 255 - _JPEG_CEILING_CODES))
     top = photo.bit_depth is not None or photo.encoding == "srgb"
     cens = np.where(v <= black, 1, np.where(top & (v >= ceiling), 2, 0)).astype(np.int32)
     return cens, (black, ceiling)

@@ -167,8 +167,8 @@ def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
     al. 2002, Appl. Opt. 41, 7437). A pixel's candidates within its tolerance of its lowest
     χ² (χ²_pk − min_k χ²_pk < `tol`_p (n,): orders the pixel does not exclude) are its
     *plausible* ones; a pixel with one plausible order (no other ≥ `distinct` nm away), or
-    one of `known` thickness (n,) (NaN elsewhere: the pads, at that thickness; the caller
-    sets it), is a seed. The film is continuous, so the decided
+    one of `known` thickness (n,) (NaN elsewhere: a pad; its candidate nearest that
+    thickness, the region continuing from the known value) is a seed. The film is continuous, so the decided
     region grows by fronts: each undecided pixel with decided 4-neighbours takes, of its
     plausible candidates, the one nearest their mean thickness. Pixels no front reaches
     (no seed in their connected region) keep their lowest χ². Candidates (n, K), χ² (n, K),
@@ -190,9 +190,12 @@ def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
     plausible[rows, best] = True
     other = plausible & (np.abs(cand_d - d_best[:, None]) >= distinct)
     seed = ~np.any(other, axis=-1)
-    if known is not None:
-        seed |= np.isfinite(known)
-        d_best = np.where(np.isfinite(known), known, d_best)
+    if known is not None:  # a pad: its candidate nearest the known thickness, at that value
+        pad = np.isfinite(known)
+        seed |= pad
+        best = np.where(pad, np.argmin(np.abs(cand_d - np.where(pad, known, 0.0)[:, None]),
+                                       axis=-1), best)
+        d_best = np.where(pad, known, d_best)
     h, w = valid.shape
     img = lambda fill, v: np.full((h * w,) + np.shape(v)[1:], fill, np.result_type(v))
     cand, ok = img(0.0, cand_d), img(False, plausible)

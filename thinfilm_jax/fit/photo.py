@@ -33,14 +33,21 @@ The fit, in the order it runs:
 3. **Screen.** χ²_p(d_g) for every pixel on a coarse grid (`screen_step_nm`, every basin of
    χ²(d) holds a grid point: fringes are ≳ 100 nm wide) as one matrix product, and the k = 4
    lowest local minima of each pixel. Channels clipped at black or full scale are censored:
-   they cost only when the model is on the wrong side of the clip.
+   they cost only when the model is on the wrong side of the clip (for a JPEG, the clip
+   levels sit a few codes inside, where its DCT rings a clipped channel: `_censoring`).
 4. **Refine.** Per pixel and candidate, fixed-step Levenberg–Marquardt (`fit.engine`) on the
-   Hermite interpolant, the thickness kept in the range. The pixel's thickness is its best
-   refined minimum; with `smoothness_nm` = τ, iterated conditional modes over the candidates
-   with the neighbour prior ½((d_p − d_q)/τ)² choose it instead (Besag 1986). Then the gains
-   (without references; an unknown camera's matrix from every pixel, the pads anchoring the
-   orders) alternate with the thicknesses until they settle, and a final refine adds the
-   prior's residuals to the neighbours.
+   Hermite interpolant, the thickness kept in the range. The film is continuous, so the
+   order is chosen by continuation (`pixelwise.grow`, as quality-guided phase unwrapping):
+   the pixels whose refined minima exclude every other order (none within (2σ)² ·
+   max(1, robust reduced χ², the pixel's χ²), the ambiguity margin of step 5) and the pads
+   seed it; the decided region grows by fronts, each pixel taking, of the orders it does
+   not exclude, the one nearest its decided neighbours. With `smoothness_nm` = τ, iterated
+   conditional modes over the candidates with the neighbour prior ½((d_p − d_q)/τ)² choose
+   instead (Besag 1986). Then the gains (without references, from the readings the model
+   puts inside the clip levels; an unknown camera's matrix from every pixel, the pads
+   anchoring the orders) alternate with the thicknesses until they settle, and a final
+   refine adds the prior's residuals to the neighbours. An unknown camera's sensitivities
+   are kept ≥ 0 (a photodiode's response; `photo_screen.matrix_from_pixels`).
 5. **Uncertainty.** The reduced χ² = Σ χ²_p / (2P − n_global) (3 residuals, one thickness per
    pixel). Standard errors are the linearised ones σ_d = (J^T J)^{-1/2} times the square root
    of the robust reduced χ² below (the noise scale of the typical pixel);
@@ -423,8 +430,9 @@ def _gains(run, photo, sig_img, cens_img, regions, table, kind):
 
 def _orders(run: _Run, table, gm):
     """The pipeline's stages 1–3 (`fit.pixelwise`) on the table: screen the k best distinct
-    local minima per pixel, refine each, choose (the lowest χ², or by the neighbour prior);
-    → (d_best, d_alt, has_alt), the pads at their known d."""
+    local minima per pixel, refine each, choose (by continuation from the decided pixels and
+    the pads, `pixelwise.grow`, or by the neighbour prior); → (d_best, d_alt, has_alt), the
+    pads at their known d."""
     k = _CANDIDATES
     n = run.obs.shape[0]
     top, top_chi = screen_all(run.obs, run.sig, run.cens,
@@ -450,7 +458,9 @@ def _orders(run: _Run, table, gm):
 def _model_from_pixels(run: _Run, table, d, kind, cmat, sub=slice(None), gm=None):
     """g C (3, 3) from the pixels `sub` at thicknesses d: an unknown camera's matrix, its
     sensitivities on the hat basis ("basis", the pads weighing as much as the rest), or the
-    closed-form gains of a known camera."""
+    closed-form gains of a known camera, without the readings that the current model `gm`
+    puts beyond a clip level (a clipped channel's JPEG ringing or a colour outside the
+    gamut: readings not of the modelled colour, which would pull its gain down)."""
     s_fit = _host_hermite(d, run.lo, run.step, *table[3:5])
     o, sg, cs, pd = run.obs[sub], run.sig[sub], run.cens[sub], run.pads[sub]
     if kind == "unknown":

@@ -17,7 +17,10 @@ leading pixel axis, run in padded chunks: one compilation per map, `jax.vmap` in
 2. **Neighbour prior** (`icm`, with `smoothness_nm` = τ): iterated conditional modes
    (Besag 1986, J. R. Stat. Soc. B 48, 259) over the candidates, each pixel in turn
    (checkerboard order) taking $\arg\min_k \tfrac12\chi^2_{pk} + \tfrac12\sum_{q \in N_4(p)}
-   ((d_{pk} - d_q)/τ)^2$: the neighbours vote for the fringe order. Without τ, the lowest.
+   ((d_{pk} - d_q)/τ)^2$: the neighbours vote for the fringe order. Without τ, the lowest
+   (maps), or (photographs) the continuation `grow`: from the pixels whose data exclude
+   every other order, the film's continuity chooses among the orders each pixel does not
+   exclude (Herráez et al. 2002, Appl. Opt. 41, 7437).
 3. **Refine** (`refine_pixel`): `steps` Levenberg–Marquardt steps (Levenberg 1944, Q. Appl.
    Math. 2, 164; Marquardt 1963, J. SIAM 11, 431; `engine.levenberg_marquardt`, the one
    solver of the fits; fixed steps, so the pixels run as one `jax.vmap` with no
@@ -64,8 +67,8 @@ from .map_quality import neighbours, order_flags
 from .options import MISFIT_QUANTILE, MisfitWarning, misfit_warnings, reduced_chi2
 from .results import MapResult
 
-__all__ = ["alternative", "choose", "fit_map", "icm", "misfit", "progress", "refine_pixel",
-           "screen_grid"]
+__all__ = ["alternative", "choose", "fit_map", "grow", "icm", "misfit", "progress",
+           "refine_pixel", "screen_grid"]
 
 
 # ----------------------------------------------------------------------------- progress
@@ -166,13 +169,14 @@ def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
     order the data decide (quality-guided path following, as in phase unwrapping: Herráez et
     al. 2002, Appl. Opt. 41, 7437). A pixel's candidates within its tolerance of its lowest
     χ² (χ²_pk − min_k χ²_pk < `tol`_p (n,): orders the pixel does not exclude) are its
-    *plausible* ones; a pixel with one plausible order (no other ≥ `distinct` nm away), or
-    one of `known` thickness (n,) (NaN elsewhere: a pad; its candidate nearest that
-    thickness, the region continuing from the known value) is a seed. The film is continuous, so the decided
-    region grows by fronts: each undecided pixel with decided 4-neighbours takes, of its
-    plausible candidates, the one nearest their mean thickness. Pixels no front reaches
-    (no seed in their connected region) keep their lowest χ². Candidates (n, K), χ² (n, K),
-    the n pixels at the flat indices `where` of `valid` (H, W); returns indices (n,).
+    *plausible* ones. Seeds: a pixel with one plausible order (no other ≥ `distinct` nm
+    away), and one of `known` thickness (n,) (NaN elsewhere: a pad; its candidate nearest
+    that thickness, the region continuing from the known value). The film is continuous,
+    so the decided region grows by fronts: each undecided pixel with decided 4-neighbours
+    takes, of its plausible candidates, the one nearest their mean thickness. Pixels no
+    front reaches (no seed in their connected region) keep their lowest χ². Candidates
+    (n, K), χ² (n, K), the n pixels at the flat indices `where` of `valid` (H, W); returns
+    the chosen indices (n,).
 
     Example (the middle pixel alone prefers 300 nm, but 100 nm is within its tolerance and
     continues its decided neighbours):
@@ -182,8 +186,7 @@ def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
         >>> grow(d, chi, np.arange(3), np.ones((1, 3), bool), np.full(3, 4.0)).tolist()
         [0, 0, 0]
     """
-    n, k = cand_d.shape
-    rows = np.arange(n)
+    rows = np.arange(cand_d.shape[0])
     best = np.argmin(cand_chi, axis=-1)
     d_best = cand_d[rows, best]
     plausible = (cand_chi - cand_chi[rows, best][:, None]) < np.asarray(tol)[:, None]
@@ -197,11 +200,14 @@ def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
                                        axis=-1), best)
         d_best = np.where(pad, known, d_best)
     h, w = valid.shape
-    img = lambda fill, v: np.full((h * w,) + np.shape(v)[1:], fill, np.result_type(v))
+
+    def img(fill, v):  # (H·W, …) filled, v at the fitted pixels
+        out = np.full((h * w,) + np.shape(v)[1:], fill, np.result_type(v))
+        out[where] = v
+        return out
+
     cand, ok = img(0.0, cand_d), img(False, plausible)
-    cand[where], ok[where] = cand_d, plausible
     idx, cur, done = img(0, best), img(0.0, d_best), img(False, seed)
-    idx[where], cur[where], done[where] = best, d_best, seed
     reach = valid.ravel()
     while True:
         nb, nb_ok = (a.reshape(h * w, 4) for a in neighbours(cur.reshape(h, w),

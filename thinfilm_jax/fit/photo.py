@@ -38,10 +38,11 @@ The fit, in the order it runs:
 4. **Refine.** Per pixel and candidate, fixed-step Levenberg–Marquardt (`fit.engine`) on the
    Hermite interpolant, the thickness kept in the range. The film is continuous, so the
    order is chosen by continuation (`pixelwise.grow`, as quality-guided phase unwrapping):
-   the pixels whose refined minima exclude every other order (none within (2σ)² ·
-   max(1, robust reduced χ², the pixel's χ²), the ambiguity margin of step 5) and the pads
-   seed it; the decided region grows by fronts, each pixel taking, of the orders it does
-   not exclude, the one nearest its decided neighbours. With `smoothness_nm` = τ, iterated
+   the pixels explained within the noise (χ²_p ≤ (2σ)² · max(1, robust reduced χ²)) whose
+   refined minima exclude every other order (none within (2σ)² · max(that, χ²_p), the
+   ambiguity margin of step 5) and the pads seed it; the decided region grows by fronts,
+   through the well-explained pixels first, each pixel taking, of the orders it does not
+   exclude, the one nearest its decided neighbours. With `smoothness_nm` = τ, iterated
    conditional modes over the candidates with the neighbour prior ½((d_p − d_q)/τ)² choose
    instead (Besag 1986). Then the gains (without references, from the readings the model
    puts inside the clip levels; an unknown camera's matrix from every pixel, the pads
@@ -445,9 +446,10 @@ def _orders(run: _Run, table, gm):
         *rep, cand0.ravel(), None, np.inf, gm, table, run.steps, run.chunk, run.bar))
     if run.smoothness_nm is None:  # continuation from the pixels the data decide
         best = np.min(cchi, axis=-1)
-        tol = PF.MARGIN_SIGMAS ** 2 * np.maximum(max(np.median(best) / _CHI2_2_MEDIAN, 1.0),
-                                                 best)
-        pick = PW.grow(cd, cchi, run.where, run.valid, tol, run.known, DISTINCT_NM)
+        noise = PF.MARGIN_SIGMAS ** 2 * max(np.median(best) / _CHI2_2_MEDIAN, 1.0)
+        pick = PW.grow(cd, cchi, run.where, run.valid, np.maximum(noise, PF.MARGIN_SIGMAS ** 2
+                                                                   * best),
+                       run.known, DISTINCT_NM, first=best <= noise)
     else:
         pick = PW.choose(cd, cchi, run.where, run.valid, run.smoothness_nm, _ICM_SWEEPS)
     d_best = np.where(run.pads, run.known, cd[np.arange(n), pick])

@@ -164,19 +164,21 @@ def choose(cand_d, cand_chi, where, valid, tau, sweeps):
                sweeps).ravel()[where]
 
 
-def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
+def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0, first=None):
     r"""Stage 2 without a prior's τ: the fringe orders by continuation from the pixels whose
     order the data decide (quality-guided path following, as in phase unwrapping: Herráez et
     al. 2002, Appl. Opt. 41, 7437). A pixel's candidates within its tolerance of its lowest
     χ² (χ²_pk − min_k χ²_pk < `tol`_p (n,): orders the pixel does not exclude) are its
     *plausible* ones. Seeds: a pixel with one plausible order (no other ≥ `distinct` nm
-    away), and one of `known` thickness (n,) (NaN elsewhere: a pad; its candidate nearest
+    away) among the `first` (n,) bool (the pixels the model explains within the noise; None:
+    all), and one of `known` thickness (n,) (NaN elsewhere: a pad; its candidate nearest
     that thickness, the region continuing from the known value). The film is continuous,
-    so the decided region grows by fronts: each undecided pixel with decided 4-neighbours
-    takes, of its plausible candidates, the one nearest their mean thickness. Pixels no
-    front reaches (no seed in their connected region) keep their lowest χ². Candidates
-    (n, K), χ² (n, K), the n pixels at the flat indices `where` of `valid` (H, W); returns
-    the chosen indices (n,).
+    so the decided region grows by fronts, first through the `first` pixels, then into the
+    rest (quality-guided: a badly explained pixel does not carry an order to a well
+    explained one): each undecided pixel with decided 4-neighbours takes, of its plausible
+    candidates, the one nearest their mean thickness. Pixels no front reaches (no seed in
+    their connected region) keep their lowest χ². Candidates (n, K), χ² (n, K), the n
+    pixels at the flat indices `where` of `valid` (H, W); returns the chosen indices (n,).
 
     Example (the middle pixel alone prefers 300 nm, but 100 nm is within its tolerance and
     continues its decided neighbours):
@@ -192,7 +194,7 @@ def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
     plausible = (cand_chi - cand_chi[rows, best][:, None]) < np.asarray(tol)[:, None]
     plausible[rows, best] = True
     other = plausible & (np.abs(cand_d - d_best[:, None]) >= distinct)
-    seed = ~np.any(other, axis=-1)
+    seed = ~np.any(other, axis=-1) & (True if first is None else first)
     if known is not None:  # a pad: its candidate nearest the known thickness, at that value
         pad = np.isfinite(known)
         seed |= pad
@@ -208,16 +210,19 @@ def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0):
 
     cand, ok = img(0.0, cand_d), img(False, plausible)
     idx, cur, done = img(0, best), img(0.0, d_best), img(False, seed)
-    reach = valid.ravel()
-    while True:
-        nb, nb_ok = (a.reshape(h * w, 4) for a in neighbours(cur.reshape(h, w),
-                                                             done.reshape(h, w)))
-        front = np.flatnonzero(reach & ~done & nb_ok.any(axis=-1))
-        if front.size == 0:
-            return idx[where]
-        mean = np.sum(nb[front] * nb_ok[front], -1) / np.sum(nb_ok[front], -1)
-        j = np.argmin(np.where(ok[front], np.abs(cand[front] - mean[:, None]), np.inf), -1)
-        idx[front], cur[front], done[front] = j, cand[front, j], True
+    stages = [valid.ravel()] if first is None else [img(False, first), valid.ravel()]
+    for reach in stages:
+        while True:
+            nb, nb_ok = (a.reshape(h * w, 4) for a in neighbours(cur.reshape(h, w),
+                                                                 done.reshape(h, w)))
+            front = np.flatnonzero(reach & ~done & nb_ok.any(axis=-1))
+            if front.size == 0:
+                break
+            mean = np.sum(nb[front] * nb_ok[front], -1) / np.sum(nb_ok[front], -1)
+            j = np.argmin(np.where(ok[front], np.abs(cand[front] - mean[:, None]), np.inf),
+                          -1)
+            idx[front], cur[front], done[front] = j, cand[front, j], True
+    return idx[where]
 
 
 def alternative(cand_d, cand_chi, d_best, distinct):

@@ -132,3 +132,18 @@ def test_unknown_camera_on_four_pads(wafer):
     assert right.mean() > 0.93
     assert np.median(err) < 3.0
     assert res.ambiguous[~out][~right].mean() >= 0.9
+
+
+def test_continuation_is_seeded_by_well_explained_pixels():
+    """A pixel the model misses by χ² = 100 (a band no order explains) excludes its other
+    order only by its misfit: it must not seed the continuation and carry its order into the
+    ambiguous pixels beside it; the well-explained seed at the other end carries its own."""
+    cand = np.tile([100.0, 300.0], (5, 1))
+    chi = np.array([[0.0, 50.0], [1.0, 0.5], [1.0, 0.5], [1.0, 0.5], [500.0, 100.0]])
+    where, valid = np.arange(5), np.ones((1, 5), bool)
+    best = chi.min(axis=-1)
+    noise = 4.0 * max(np.median(best) / (2 * np.log(2)), 1.0)  # fit_photo's (2σ)² · s
+    tol = np.maximum(noise, 4.0 * best)
+    assert grow(cand, chi, where, valid, tol)[3] == 1  # seeded by the misfit pixel too
+    pick = grow(cand, chi, where, valid, tol, first=best <= noise)
+    assert pick.tolist() == [0, 0, 0, 0, 1]  # the misfit pixel keeps its own order

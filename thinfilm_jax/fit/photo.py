@@ -33,14 +33,22 @@ The fit, in the order it runs:
 3. **Screen.** χ²_p(d_g) for every pixel on a coarse grid (`screen_step_nm`, every basin of
    χ²(d) holds a grid point: fringes are ≳ 100 nm wide) as one matrix product, and the k = 4
    lowest local minima of each pixel. Channels clipped at black or full scale are censored:
-   they cost only when the model is on the wrong side of the clip.
+   they cost only when the model is on the wrong side of the clip (for a JPEG, the clip
+   levels sit a few codes inside, where its DCT rings a clipped channel: `_censoring`).
 4. **Refine.** Per pixel and candidate, fixed-step Levenberg–Marquardt (`fit.engine`) on the
-   Hermite interpolant, the thickness kept in the range. The pixel's thickness is its best
-   refined minimum; with `smoothness_nm` = τ, iterated conditional modes over the candidates
-   with the neighbour prior ½((d_p − d_q)/τ)² choose it instead (Besag 1986). Then the gains
-   (without references; an unknown camera's matrix from every pixel, the pads anchoring the
-   orders) alternate with the thicknesses until they settle, and a final refine adds the
-   prior's residuals to the neighbours.
+   Hermite interpolant, the thickness kept in the range. The film is continuous, so the
+   order is chosen by continuation (`pixelwise.grow`, as quality-guided phase unwrapping):
+   the pixels explained within the noise (χ²_p ≤ (2σ)² · max(1, robust reduced χ²)) whose
+   refined minima exclude every other order (none within (2σ)² · max(that, χ²_p), the
+   ambiguity margin of step 5) and the pads seed it; the decided region grows by fronts,
+   through the well-explained pixels first, each pixel taking, of the orders it does not
+   exclude, the one nearest its decided neighbours. With `smoothness_nm` = τ, iterated
+   conditional modes over the candidates with the neighbour prior ½((d_p − d_q)/τ)² choose
+   instead (Besag 1986). Then the gains (without references, from the readings the model
+   puts inside the clip levels; an unknown camera's matrix from every pixel, the pads
+   anchoring the orders) alternate with the thicknesses until they settle, and a final
+   refine adds the prior's residuals to the neighbours. An unknown camera's sensitivities
+   are kept ≥ 0 (a photodiode's response; `photo_screen.matrix_from_pixels`).
 5. **Uncertainty.** The reduced χ² = Σ χ²_p / (2P − n_global) (3 residuals, one thickness per
    pixel). Standard errors are the linearised ones σ_d = (J^T J)^{-1/2} times the square root
    of the robust reduced χ² below (the noise scale of the typical pixel);
@@ -85,6 +93,7 @@ import numpy as np
 from ..core import _validate as V
 from ..core.image import Photo, read_mask, read_photo
 from ..spectral.camera import Camera, camera_response, sensitivity_basis
+from . import photo_flags as PF
 from . import pixelwise as PW
 from .photo_flags import fit_notes
 from .photo_flags import reasons as flag_reasons
@@ -118,6 +127,7 @@ _ICM_SWEEPS = 6  # sweeps of the neighbour prior over the candidates
 _MODEL_FLOOR = 0.005  # relative model uncertainty (camera, light, material known so well)
 _JPEG_FLOOR = 0.02  # … of a lossy JPEG, in the misfit statistics (quality 75–95: robust χ²
 _JPEG_BLACK_CODES = 6  # 0.8–2.4 with it); codes ≤ this of a JPEG channel are black-clipped
+_JPEG_CEILING_CODES = 16  # codes ≥ 255 − this: clipped at full scale, rung down (Gibbs)
 _JPEG_SUFFIXES = (".jpg", ".jpeg")
 _CHI2_2_MEDIAN = 2.0 * np.log(2.0)  # the median of χ² with 2 degrees of freedom
 _GAIN_PIXELS = 16384  # pixels of the gain alternation (and every pad pixel)
@@ -191,19 +201,34 @@ def _check_model(template, camera, illuminant, reference, layer, illumination, v
     return cam, stack
 
 
-def _censoring(photo: Photo, lossy: bool) -> tuple[np.ndarray, float]:
-    """((H, W, 3) per channel: 0 a reading, 1 clipped at black, 2 clipped at full scale (≥ 1,
-    for integer or sRGB-encoded sources; linear float data have no ceiling); the black level
-    b). b = 0, except for a lossy (JPEG) file, whose DCT rings a clipped channel up to a few
-    codes: b is the linear value of `_JPEG_BLACK_CODES` / 255 there."""
+def _decode(v: float, encoding: str) -> float:
+    """The linear value of the encoded value v (IEC 61966-2-1 for "srgb", colour-science's
+    ``cctf_decoding``, as `core.image.read_photo`; else v itself)."""
+    if encoding != "srgb":
+        return v
+    import colour
+
+    return float(colour.cctf_decoding(v, function="sRGB"))
+
+
+def _censoring(photo: Photo, lossy: bool) -> tuple[np.ndarray, tuple[float, float]]:
+    """((H, W, 3) per channel: 0 a reading, 1 clipped at black, 2 clipped at full scale (for
+    integer or sRGB-encoded sources; linear float data have no ceiling); the clip levels
+    (b, c)). b = 0 and c = 1, except for a lossy (JPEG) file, whose DCT rings a clipped
+    channel away from its clip (the Gibbs overshoot of the 8 × 8 blocks' quantised cosines,
+    widened by the chroma subsampling: up to ~25 codes at a saturated colour's edge, ~8 in
+    the soap film's over-exposed fringes, docs/studies/photographs.md): b is the linear
+    value of `_JPEG_BLACK_CODES` / 255 there and c that of (255 − `_JPEG_CEILING_CODES`) /
+    255. A channel beyond a level is a censored observation, the truth beyond the level by
+    an unknown amount (`photo_screen.residual`), not a reading."""
     v = photo.linear
-    black = 0.0
+    black, ceiling = 0.0, 1.0
     if lossy:
-        code = _JPEG_BLACK_CODES / 255.0
-        black = float(np.asarray(code / 12.92 if photo.encoding == "srgb" else code))
-    ceiling = photo.bit_depth is not None or photo.encoding == "srgb"
-    cens = np.where(v <= black, 1, np.where(ceiling & (v >= 1.0), 2, 0)).astype(np.int32)
-    return cens, black
+        black, ceiling = (_decode(c / 255.0, photo.encoding)
+                          for c in (_JPEG_BLACK_CODES, 255 - _JPEG_CEILING_CODES))
+    top = photo.bit_depth is not None or photo.encoding == "srgb"
+    cens = np.where(v <= black, 1, np.where(top & (v >= ceiling), 2, 0)).astype(np.int32)
+    return cens, (black, ceiling)
 
 
 def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srgb",
@@ -271,13 +296,13 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     cam, stack = _check_model(template, camera, illuminant, reference, layer, illumination,
                               (theta_o, alpha, na))
     photo: Photo = read_photo(image, encoding, bit_depth=bit_depth)
-    cens_img, black = _censoring(photo, jpeg)
+    cens_img, levels = _censoring(photo, jpeg)
     valid = ~np.all(cens_img > 0, axis=-1)
     if mask is not None:
         valid &= read_mask(mask, valid.shape, name="mask")
     if not valid.any():
         raise ValueError("no pixel to fit: every pixel is clipped or outside the mask")
-    run, regions, sig_img = _setup(photo, valid, cens_img, black, reference, stack, layer, cam,
+    run, regions, sig_img = _setup(photo, valid, cens_img, levels, reference, stack, layer, cam,
                                    (lo, hi), (theta_o, alpha, na), grid_step_nm, screen_step_nm,
                                    model_floor, smoothness_nm, steps, chunk)
     table = _table(run, cam)
@@ -342,7 +367,7 @@ class _Run(NamedTuple):
     lo: float
     hi: float
     step: float
-    black: float
+    levels: tuple
     geom: tuple
     smoothness_nm: float | None
     steps: int
@@ -357,7 +382,7 @@ def _noise(photo: Photo, floor):
                    + (1e-6 * max(float(photo.linear.max()), 1e-12)) ** 2)
 
 
-def _setup(photo, valid, cens_img, black, reference, stack, layer, cam, box, view,
+def _setup(photo, valid, cens_img, levels, reference, stack, layer, cam, box, view,
            grid_step_nm, screen_step_nm, model_floor, smoothness_nm, steps, chunk):
     """(`_Run`, reference regions, σ image): the pixels to fit, the table's grid (step
     `grid_step_nm`) and the screen's (every m-th point), the view's cosines and weights."""
@@ -379,17 +404,17 @@ def _setup(photo, valid, cens_img, black, reference, stack, layer, cam, box, vie
     known = known[where]
     run = _Run(photo.linear.reshape(-1, 3)[where], sig_img.reshape(-1, 3)[where],
                cens_img.reshape(-1, 3)[where], known, np.isfinite(known), valid, where, grid,
-               coarse, lo, hi, step, black, (stack, layer, jnp.asarray(cos), jnp.asarray(qw)),
+               coarse, lo, hi, step, levels, (stack, layer, jnp.asarray(cos), jnp.asarray(qw)),
                smoothness_nm, steps, chunk)
     return run, regions, sig_img
 
 
 def _table(run: _Run, camera: Camera):
-    """The table (lo, hi, step, s (G, 3), ds/dd (G, 3), black) of the camera's colours."""
+    """The table (lo, hi, step, s (G, 3), ds/dd (G, 3), clip levels) of the camera's colours."""
     s_tab, ds_tab = (np.asarray(v) for v in _colours(
         jnp.asarray(run.grid), *run.geom, jnp.asarray(camera.wavelengths),
         jnp.asarray(camera.weights)))
-    return (run.lo, run.hi, run.step, s_tab, ds_tab, run.black)
+    return (run.lo, run.hi, run.step, s_tab, ds_tab, run.levels)
 
 
 def _gains(run, photo, sig_img, cens_img, regions, table, kind):
@@ -400,34 +425,44 @@ def _gains(run, photo, sig_img, cens_img, regions, table, kind):
 
         return reference_gains(photo.linear, sig_img, cens_img, regions, s_of, kind)
     gains = search_gains(run.obs, run.sig, run.cens, table[3][run.coarse],
-                         jnp.asarray(run.grid[run.coarse]), run.chunk, run.black)
+                         jnp.asarray(run.grid[run.coarse]), run.chunk, run.levels)
     return gains, np.eye(3), np.zeros((3, 3))
 
 
 def _orders(run: _Run, table, gm):
     """The pipeline's stages 1–3 (`fit.pixelwise`) on the table: screen the k best distinct
-    local minima per pixel, refine each, choose (the lowest χ², or by the neighbour prior);
-    → (d_best, d_alt, has_alt), the pads at their known d."""
+    local minima per pixel, refine each, choose (by continuation from the decided pixels and
+    the pads, `pixelwise.grow`, or by the neighbour prior); → (d_best, d_alt, has_alt), the
+    pads at their known d."""
     k = _CANDIDATES
     n = run.obs.shape[0]
     top, top_chi = screen_all(run.obs, run.sig, run.cens,
-                              features(table[3][run.coarse] @ gm.T, run.black),
+                              features(table[3][run.coarse] @ gm.T, run.levels),
                               jnp.asarray(run.grid[run.coarse]), k, run.chunk, run.bar)
     cand0 = run.grid[run.coarse][top]  # (n, k); a missing minimum repeats the pixel's best
     cand0 = np.where(np.isfinite(top_chi), cand0, cand0[:, :1])
     rep = (np.repeat(a, k, axis=0) for a in (run.obs, run.sig, run.cens))
     cd, cchi, _ = (v.reshape(n, k) for v in _refine_all(
         *rep, cand0.ravel(), None, np.inf, gm, table, run.steps, run.chunk, run.bar))
-    pick = PW.choose(cd, cchi, run.where, run.valid, run.smoothness_nm, _ICM_SWEEPS)
+    if run.smoothness_nm is None:  # continuation from the pixels the data decide
+        best = np.min(cchi, axis=-1)
+        noise = PF.MARGIN_SIGMAS ** 2 * max(np.median(best) / _CHI2_2_MEDIAN, 1.0)
+        pick = PW.grow(cd, cchi, run.where, run.valid, np.maximum(noise, PF.MARGIN_SIGMAS ** 2
+                                                                   * best),
+                       run.known, DISTINCT_NM, first=best <= noise)
+    else:
+        pick = PW.choose(cd, cchi, run.where, run.valid, run.smoothness_nm, _ICM_SWEEPS)
     d_best = np.where(run.pads, run.known, cd[np.arange(n), pick])
     d_alt, has_alt = PW.alternative(cd, cchi, d_best, DISTINCT_NM)
     return d_best, d_alt, has_alt
 
 
-def _model_from_pixels(run: _Run, table, d, kind, cmat, sub=slice(None)):
+def _model_from_pixels(run: _Run, table, d, kind, cmat, sub=slice(None), gm=None):
     """g C (3, 3) from the pixels `sub` at thicknesses d: an unknown camera's matrix, its
     sensitivities on the hat basis ("basis", the pads weighing as much as the rest), or the
-    closed-form gains of a known camera."""
+    closed-form gains of a known camera, without the readings that the current model `gm`
+    puts beyond a clip level (a clipped channel's JPEG ringing or a colour outside the
+    gamut: readings not of the modelled colour, which would pull its gain down)."""
     s_fit = _host_hermite(d, run.lo, run.step, *table[3:5])
     o, sg, cs, pd = run.obs[sub], run.sig[sub], run.cens[sub], run.pads[sub]
     if kind == "unknown":
@@ -436,7 +471,11 @@ def _model_from_pixels(run: _Run, table, d, kind, cmat, sub=slice(None)):
         up = np.sqrt(max((pd.size - pd.sum()) / max(pd.sum(), 1), 1.0)) * _PAD_WEIGHT
         return matrix_from_pixels(o, sg / np.where(pd, up, 1.0)[:, None], cs, s_fit,
                                   smooth=_BASIS_SMOOTHING)
-    return closed_gains(o, sg, cs, s_fit @ cmat.T)[:, None] * cmat
+    s_c = s_fit @ cmat.T
+    if gm is not None:  # a channel the model puts beyond a clip level is censored there too
+        pred = s_fit @ gm.T
+        cs = np.where((cs == 0) & ((pred <= run.levels[0]) | (pred >= run.levels[1])), 3, cs)
+    return closed_gains(o, sg, cs, s_c)[:, None] * cmat
 
 
 class _Fit(NamedTuple):
@@ -462,7 +501,7 @@ def _solve(run: _Run, table, gains, cmat, regions, kind, illuminant) -> _Fit:
     sub = np.unique(np.r_[np.arange(0, n, max(1, n // _GAIN_PIXELS)), np.flatnonzero(run.pads)])
     d_sub = d_best[sub]
     for _ in range(_GAIN_ROUNDS if not regions or kind == "unknown" else 0):
-        gm_new = _model_from_pixels(run, table, d_sub, kind, cmat, sub)
+        gm_new = _model_from_pixels(run, table, d_sub, kind, cmat, sub, gm)
         change = np.max(np.abs(gm_new - gm)) / np.max(np.abs(gm))
         gm = gm_new
         d_sub = np.where(run.pads[sub], run.known[sub], _refine_all(
@@ -512,7 +551,7 @@ def _score(run: _Run, fit: _Fit, cam, photo, sig_rep, chi2_warn, cens_img, jpeg,
         pred = _host_hermite(fit.d, run.lo, run.step, *fit.table[3:5]) @ fit.gm.T
         chi = np.sum(np.asarray(residual(jnp.asarray(pred), jnp.asarray(run.obs),
                                          jnp.asarray(sig_rep), jnp.asarray(run.cens),
-                                         run.black)) ** 2, axis=-1)
+                                         run.levels)) ** 2, axis=-1)
     rchi2 = float(np.sum(chi) / dof)
     robust = float(np.median(chi) / _CHI2_2_MEDIAN)
     misfit = (f"{chi2_text(robust, rchi2)} > {chi2_warn:g}: the model does not explain the "
@@ -527,7 +566,7 @@ def _score(run: _Run, fit: _Fit, cam, photo, sig_rep, chi2_warn, cens_img, jpeg,
 
 def _smooth_light(obs, sig, cens, known, phi, gains, cmat, table, coarse, chunk, steps):
     """`fit.photo_light.fit_light` on the table: (L (n,), gains (3,), identifiability)."""
-    lo, _, step, s_tab, ds_tab, black = table
+    lo, _, step, s_tab, ds_tab, levels = table
     feats_grid = jnp.asarray(coarse)
     s_coarse = s_tab[np.rint((coarse - lo) / step).astype(int)]
 
@@ -537,7 +576,7 @@ def _smooth_light(obs, sig, cens, known, phi, gains, cmat, table, coarse, chunk,
         return _host_hermite(d, lo, step, s_tab, ds_tab), dd
 
     def screen(o, sg, cs, gm):
-        top, _ = screen_all(o, sg, cs, features(s_coarse @ gm.T, black), feats_grid, 1,
+        top, _ = screen_all(o, sg, cs, features(s_coarse @ gm.T, levels), feats_grid, 1,
                             chunk, None)
         return coarse[top[:, 0]]
 

@@ -128,7 +128,7 @@ def _hermite(d, lo, h, s, ds):
 
 
 @functools.partial(jax.jit, static_argnames=("steps", "want_se"))
-def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, black,
+def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds_tab, levels,
             steps, want_se):
     """Per pixel: `pixelwise.refine_pixel` on [(g C s(d) − o)/σ, (d − d_q)/τ]; returns d, the
     data χ² and the standard error (absolute σ)."""
@@ -136,7 +136,7 @@ def _refine(obs, sig, cens, d0, nb, nb_ok, tau, gm, lo_d, hi_d, lo, h, s_tab, ds
     def pixel(o, sg, cs, x0, q, ok):
         def data(x):
             pred = jnp.matmul(gm, _hermite(x[0], lo, h, s_tab, ds_tab), precision=_HI)
-            return residual(pred, o, sg, cs, black)
+            return residual(pred, o, sg, cs, levels)
 
         x, chi, se = refine_pixel(data, x0[None], q, ok, tau, lo_d[None], hi_d[None], steps,
                                   want_se)
@@ -173,7 +173,7 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
                 want_se=False):
     """`_refine` over every pixel in chunks: the neighbour prior (τ finite) needs `valid`
     (H, W) and the fitted pixels' flat indices `where` (their neighbours' current d0)."""
-    lo, hi, step, s_tab, ds_tab, black = table
+    lo, hi, step, s_tab, ds_tab, levels = table
     n = obs.shape[0]
     if valid is not None:
         h, w = valid.shape
@@ -185,7 +185,7 @@ def _refine_all(obs, sig, cens, d0, valid, tau, gm, table, steps, chunk, bar, wh
         nb, ok = np.zeros((n, 4)), np.zeros((n, 4), bool)
     consts = (jnp.asarray(min(tau, 1e30)), jnp.asarray(gm), jnp.asarray(lo), jnp.asarray(hi),
               jnp.asarray(lo), jnp.asarray(step), jnp.asarray(s_tab), jnp.asarray(ds_tab),
-              jnp.asarray(black))
+              jnp.asarray(levels))
     out = []
     size = bucket(n, chunk)
     for s in chunks(n, size):

@@ -14,7 +14,7 @@ closed-form gains of that colour are 1):
     >>> pred = np.stack([0.5 + 0.4 * np.cos(grid / f) for f in (40.0, 55.0, 70.0)], -1)
     >>> obs, sig, cens = pred[30:31], np.full((1, 3), 0.01), np.zeros((1, 3), int)
     >>> idx, chi = screen(jnp.asarray(obs), jnp.asarray(sig), jnp.asarray(cens),
-    ...                   features(pred, 0.0), jnp.asarray(grid), 1)
+    ...                   features(pred, (0.0, 1.0)), jnp.asarray(grid), 1)
     >>> float(grid[int(idx[0, 0])]), float(chi[0, 0]) < 1e-12
     (300.0, True)
     >>> closed_gains(obs, sig, cens, pred[30:31]).round(6).tolist()
@@ -28,6 +28,7 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.optimize import nnls
 
 _HI = jax.lax.Precision.HIGHEST
 _EXPOSURE_LADDER = 2.0 ** np.arange(-2.0, 2.01, 0.5)  # × the brightness-matched exposure
@@ -43,8 +44,8 @@ def screen(obs, sig, cens, feats, grid, k):
 
     Channels censored at 0 or at full scale (`cens` 1 / 2) cost only on the wrong side
     (`residual`). χ² is one matrix product: pixel terms (P, 12) against the grid's
-    `feats` (G, 12) = [pred², pred, relu(pred − b)², relu(1 − pred)²] per channel (b the
-    black level, `fit.photo._censoring`), plus Σ w o²."""
+    `feats` (G, 12) = [pred², pred, relu(pred − b)², relu(c − pred)²] per channel (b the
+    black level, c the ceiling, `fit.photo._censoring`), plus Σ w o²."""
     w = 1.0 / (sig * sig)  # (P, 3)
     wu, wl, wh = (w * (cens == c).astype(w.dtype) for c in (0, 1, 2))
     a = jnp.concatenate([wu, -2.0 * obs * wu, wl, wh], axis=-1)  # (P, 12)
@@ -63,20 +64,23 @@ def screen(obs, sig, cens, feats, grid, k):
     return jnp.stack(tops, -1), jnp.stack(chis, -1)
 
 
-def features(pred, black):
-    """(G, 12) grid terms of `screen` from the predictions (G, 3) and the black level."""
+def features(pred, levels):
+    """(G, 12) grid terms of `screen` from the predictions (G, 3) and the clip `levels`
+    (black b, ceiling c; `fit.photo._censoring`)."""
     relu = np.maximum
+    black, ceiling = levels
     return jnp.asarray(np.concatenate([pred * pred, pred, relu(pred - black, 0.0) ** 2,
-                                       relu(1.0 - pred, 0.0) ** 2], axis=-1))
+                                       relu(ceiling - pred, 0.0) ** 2], axis=-1))
 
 
-def residual(pred, o, sg, cens, black):
+def residual(pred, o, sg, cens, levels):
     """(pred − o)/σ per channel; a channel censored at black (1) costs relu(pred − b)/σ, one
-    at full scale (2) relu(1 − pred)/σ: a clipped reading says only on which side the truth
-    is (b the black level, `fit.photo._censoring`)."""
+    at full scale (2) relu(c − pred)/σ: a clipped reading says only on which side the truth
+    is, a one-sided (censored) observation (`levels` = (b, c), the black level and the
+    ceiling, `fit.photo._censoring`)."""
     return jnp.where(cens == 0, pred - o,
-                     jnp.where(cens == 1, jax.nn.relu(pred - black),
-                               jax.nn.relu(1.0 - pred))) / sg
+                     jnp.where(cens == 1, jax.nn.relu(pred - levels[0]),
+                               jax.nn.relu(levels[1] - pred))) / sg
 
 
 def bucket(n, chunk):
@@ -116,7 +120,7 @@ def closed_gains(obs, sig, cens, s_c):
     return np.sum(obs * s_c * w, axis=0) / np.maximum(np.sum(s_c * s_c * w, axis=0), 1e-300)
 
 
-def search_gains(obs, sig, cens, s_screen, grid, chunk, black):
+def search_gains(obs, sig, cens, s_screen, grid, chunk, levels):
     """Gains without references (`fit.photo`, step 2): alternating minimisation from a
     ladder of exposures around the brightness-matched one, on a subsample, on the screen
     grid's colours `s_screen` (G, 3)."""
@@ -127,7 +131,7 @@ def search_gains(obs, sig, cens, s_screen, grid, chunk, black):
     for e in e0 * _EXPOSURE_LADDER:
         g = np.full(3, e)
         for _ in range(8):
-            idx, chi = screen_all(o, sg, cs, features(s_screen * g, black), grid, 1, chunk,
+            idx, chi = screen_all(o, sg, cs, features(s_screen * g, levels), grid, 1, chunk,
                                    None)
             g_new = closed_gains(o, sg, cs, s_screen[idx[:, 0]])
             if np.allclose(g_new, g, rtol=1e-4):
@@ -179,7 +183,13 @@ def matrix_from_pixels(obs, sig, cens, s_fit, smooth: float = 0.0):
     """M (3, B) with o_c ≈ Σ_b M_cb s_b over every uncensored reading: per channel a
     weighted linear least-squares fit (the unknown camera's self-calibration), with a
     penalty `smooth` · tr(XᵀWX)/tr(DᵀD) · ‖D m_c‖² on the second differences D of the
-    coefficients (smooth sensitivities on a hat basis; 0 for the 3 × 3 matrix)."""
+    coefficients (smooth sensitivities on a hat basis; 0 for the 3 × 3 matrix). On the hat
+    basis (`smooth` > 0) the coefficients are the sensitivities at the knots, which a
+    photodiode's physics keeps ≥ 0: the penalised least squares is solved under m ≥ 0
+    (Lawson & Hanson 1974, *Solving Least Squares Problems*, ch. 23, scipy's ``nnls``, on
+    the Cholesky factor of its normal equations). Unconstrained, the pixels' self-calibration
+    from a few pads bends the sensitivities negative to fit wrong orders beyond the pads'
+    span (docs/studies/photographs.md)."""
     b = s_fit.shape[1]
     d2 = np.diff(np.eye(b), 2, axis=0)
     rows = []
@@ -188,6 +198,11 @@ def matrix_from_pixels(obs, sig, cens, s_fit, smooth: float = 0.0):
         x = s_fit * w[:, None]
         a = x.T @ x
         reg = smooth * np.trace(a) / max(np.trace(d2.T @ d2), 1e-300)
-        rows.append(np.linalg.solve(a + reg * d2.T @ d2 + 1e-12 * np.trace(a) / b * np.eye(b),
-                                    x.T @ (obs[:, c] * w)))
+        a = a + reg * d2.T @ d2 + 1e-12 * np.trace(a) / b * np.eye(b)
+        rhs = x.T @ (obs[:, c] * w)
+        if smooth > 0:  # sensitivities: a photodiode's response is ≥ 0 at every wavelength
+            r = np.linalg.cholesky(a).T  # mᵀ a m − 2 mᵀ rhs = ‖r m − r⁻ᵀ rhs‖² + const
+            rows.append(nnls(r, np.linalg.solve(r.T, rhs))[0])
+        else:
+            rows.append(np.linalg.solve(a, rhs))
     return np.stack(rows)

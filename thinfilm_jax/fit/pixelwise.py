@@ -17,7 +17,10 @@ leading pixel axis, run in padded chunks: one compilation per map, `jax.vmap` in
 2. **Neighbour prior** (`icm`, with `smoothness_nm` = τ): iterated conditional modes
    (Besag 1986, J. R. Stat. Soc. B 48, 259) over the candidates, each pixel in turn
    (checkerboard order) taking $\arg\min_k \tfrac12\chi^2_{pk} + \tfrac12\sum_{q \in N_4(p)}
-   ((d_{pk} - d_q)/τ)^2$: the neighbours vote for the fringe order. Without τ, the lowest.
+   ((d_{pk} - d_q)/τ)^2$: the neighbours vote for the fringe order. Without τ, the lowest
+   (maps), or (photographs) the continuation `grow`: from the pixels whose data exclude
+   every other order, the film's continuity chooses among the orders each pixel does not
+   exclude (Herráez et al. 2002, Appl. Opt. 41, 7437).
 3. **Refine** (`refine_pixel`): `steps` Levenberg–Marquardt steps (Levenberg 1944, Q. Appl.
    Math. 2, 164; Marquardt 1963, J. SIAM 11, 431; `engine.levenberg_marquardt`, the one
    solver of the fits; fixed steps, so the pixels run as one `jax.vmap` with no
@@ -64,8 +67,8 @@ from .map_quality import neighbours, order_flags
 from .options import MISFIT_QUANTILE, MisfitWarning, misfit_warnings, reduced_chi2
 from .results import MapResult
 
-__all__ = ["alternative", "choose", "fit_map", "icm", "misfit", "progress", "refine_pixel",
-           "screen_grid"]
+__all__ = ["alternative", "choose", "fit_map", "grow", "icm", "misfit", "progress",
+           "refine_pixel", "screen_grid"]
 
 
 # ----------------------------------------------------------------------------- progress
@@ -159,6 +162,67 @@ def choose(cand_d, cand_chi, where, valid, tau, sweeps):
     cd_img[where], cchi_img[where] = cand_d, cand_chi
     return icm(0.5 * cchi_img.reshape(h, w, k), cd_img.reshape(h, w, k), valid, float(tau),
                sweeps).ravel()[where]
+
+
+def grow(cand_d, cand_chi, where, valid, tol, known=None, distinct=15.0, first=None):
+    r"""Stage 2 without a prior's τ: the fringe orders by continuation from the pixels whose
+    order the data decide (quality-guided path following, as in phase unwrapping: Herráez et
+    al. 2002, Appl. Opt. 41, 7437). A pixel's candidates within its tolerance of its lowest
+    χ² (χ²_pk − min_k χ²_pk < `tol`_p (n,): orders the pixel does not exclude) are its
+    *plausible* ones. Seeds: a pixel with one plausible order (no other ≥ `distinct` nm
+    away) among the `first` (n,) bool (the pixels the model explains within the noise; None:
+    all), and one of `known` thickness (n,) (NaN elsewhere: a pad; its candidate nearest
+    that thickness, the region continuing from the known value). The film is continuous,
+    so the decided region grows by fronts, first through the `first` pixels, then into the
+    rest (quality-guided: a badly explained pixel does not carry an order to a well
+    explained one): each undecided pixel with decided 4-neighbours takes, of its plausible
+    candidates, the one nearest their mean thickness. Pixels no front reaches (no seed in
+    their connected region) keep their lowest χ². Candidates (n, K), χ² (n, K), the n
+    pixels at the flat indices `where` of `valid` (H, W); returns the chosen indices (n,).
+
+    Example (the middle pixel alone prefers 300 nm, but 100 nm is within its tolerance and
+    continues its decided neighbours):
+        >>> import numpy as np
+        >>> d = np.array([[100.0, 300.0]] * 3); chi = np.array([[0.0, 50.0], [0.1, 0.0],
+        ...                                                    [0.0, 50.0]])
+        >>> grow(d, chi, np.arange(3), np.ones((1, 3), bool), np.full(3, 4.0)).tolist()
+        [0, 0, 0]
+    """
+    rows = np.arange(cand_d.shape[0])
+    best = np.argmin(cand_chi, axis=-1)
+    d_best = cand_d[rows, best]
+    plausible = (cand_chi - cand_chi[rows, best][:, None]) < np.asarray(tol)[:, None]
+    plausible[rows, best] = True
+    other = plausible & (np.abs(cand_d - d_best[:, None]) >= distinct)
+    seed = ~np.any(other, axis=-1) & (True if first is None else first)
+    if known is not None:  # a pad: its candidate nearest the known thickness, at that value
+        pad = np.isfinite(known)
+        seed |= pad
+        best = np.where(pad, np.argmin(np.abs(cand_d - np.where(pad, known, 0.0)[:, None]),
+                                       axis=-1), best)
+        d_best = np.where(pad, known, d_best)
+    h, w = valid.shape
+
+    def img(fill, v):  # (H·W, …) filled, v at the fitted pixels
+        out = np.full((h * w,) + np.shape(v)[1:], fill, np.result_type(v))
+        out[where] = v
+        return out
+
+    cand, ok = img(0.0, cand_d), img(False, plausible)
+    idx, cur, done = img(0, best), img(0.0, d_best), img(False, seed)
+    stages = [valid.ravel()] if first is None else [img(False, first), valid.ravel()]
+    for reach in stages:
+        while True:
+            nb, nb_ok = (a.reshape(h * w, 4) for a in neighbours(cur.reshape(h, w),
+                                                                 done.reshape(h, w)))
+            front = np.flatnonzero(reach & ~done & nb_ok.any(axis=-1))
+            if front.size == 0:
+                break
+            mean = np.sum(nb[front] * nb_ok[front], -1) / np.sum(nb_ok[front], -1)
+            j = np.argmin(np.where(ok[front], np.abs(cand[front] - mean[:, None]), np.inf),
+                          -1)
+            idx[front], cur[front], done[front] = j, cand[front, j], True
+    return idx[where]
 
 
 def alternative(cand_d, cand_chi, d_best, distinct):

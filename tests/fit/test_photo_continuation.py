@@ -103,7 +103,7 @@ def wafer():
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    S = pytest.importorskip("thinfilm_jax.studies.photo_scenes")
+    S = pytest.importorskip("benchmarks.photo_scenes")
     n = 48
     tpl = S.templates()["oxide"]
     d, pads = S.oxide_thickness(n)

@@ -32,11 +32,12 @@ from ..core import _validate as V
 from ..core.film import Film
 from ..core.material import is_dispersive
 from ..core.methods import METHODS as METHOD_INFO
+from ..core.methods import implementation
 from ..spectral.colorimetry import delta_e2000
 from ..spectral.spectra import DEFAULT_OBSERVER
 from .colour_table import prefilter_colour
 from .envmap import EnvMap, load_envmap
-from .ibl import DEFAULT_SOURCES, METHODS, envmap_radiance
+from .ibl import DEFAULT_SOURCES, METHODS, envmap_radiance  # noqa: F401 (DEFAULT_SOURCES: docs)
 from .prefilter import PrefilteredEnvMap, prefilter_envmap
 
 #: What `compare_methods` runs by default: the reference and the real-time methods (Monte
@@ -117,7 +118,7 @@ def compare_methods(film: Film, alpha, normal, view, envmap, *,
         if METHOD_INFO[m].exact:
             source, n = env, None
         else:
-            n = sources if sources is not None else (DEFAULT_SOURCES if m == "improved" else 0)
+            n = sources if sources is not None else implementation(m).default_sources
             if n not in maps:
                 maps[n] = prefilter_envmap(env, observer=observer, sources=n,
                                            **(prefilter or {}))

@@ -627,7 +627,7 @@ def test_explicit_options_equal_to_the_default_give_the_default_program(constant
     here, not the exact quadrature that made it 9-14x slower a point), while another K is
     another program whose (θ_o, α) tables are built once, not per call. Without timing: the
     lowered HLO text of the real-time entry, and the bin tables' cache counts."""
-    from thinfilm_jax.realtime import improved
+    from thinfilm_jax.realtime import improved_table
     from thinfilm_jax.realtime.options import check_options
     from thinfilm_jax.shading import ibl
 
@@ -646,7 +646,7 @@ def test_explicit_options_equal_to_the_default_give_the_default_program(constant
     assert hlo(options=ModelOptions()) == default
     assert hlo(options=ModelOptions(shat="exact")) != default  # an explicit choice holds
     hlo(options=ModelOptions(bins=2))
-    before = improved._bin_table_cached.cache_info()
+    before = improved_table._bin_table_cached.cache_info()
     assert hlo(options=ModelOptions(bins=2)) != default
-    after = improved._bin_table_cached.cache_info()
+    after = improved_table._bin_table_cached.cache_info()
     assert after.misses == before.misses and after.hits > before.hits

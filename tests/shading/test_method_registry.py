@@ -104,3 +104,30 @@ def test_builtin_rows_and_material_path():
     assert methods.material_path(stack, "ideal") == "stack"
     with pytest.raises(ValueError, match="method='filtered' cannot model layer stacks"):
         methods.material_path(stack, "filtered")
+
+
+def test_material_kinds_by_type():
+    """`patch_radiance` and `envmap_radiance` take every material kind, by type: a classic-lobe
+    `Material` with a film Fresnel term and a GGX lobe is the film's reference (two separate
+    quadratures of one integral), a Lambert `Material` under a white map is its albedo 0.6,
+    and a Lambert `CarPaint` is its coat's Fresnel plus the lobe albedo (closed forms)."""
+    from thinfilm_jax.brdf import carpaint as C
+
+    film = tf.Film(600.0, 1.3, 2.0, 0.5)
+    theta = np.array([0.2, 1.0])
+    mat = tf.Material(tf.ggx_lobe(0.3), tf.film_fresnel(film), tf.no_diffuse())
+    np.testing.assert_allclose(tf.patch_radiance(mat, theta), tf.patch_radiance(film, theta, 0.3),
+                               atol=1e-12)
+    lam = tf.Material(tf.no_specular(), tf.no_fresnel(), tf.lambert_diffuse(0.6))
+    n, v = np.array([0.0, 0.0, 1.0]), np.array([np.sin(0.5), 0.0, np.cos(0.5)])
+    np.testing.assert_allclose(tf.envmap_radiance(lam, None, n, v, np.ones((8, 16, 3))), 0.6,
+                               atol=1e-12)
+    paint = C.car_paint(0.8, [0.0], [0.5], [0.0], C.plain_colour([1.0, 1.0, 1.0]), 1.5)
+    want = C.coat_reflectance(paint, np.cos(0.5)) + C.lobe_albedo(paint, np.cos(0.5))[-1]
+    np.testing.assert_allclose(tf.patch_radiance(paint, 0.5), want, atol=1e-13)
+    with pytest.raises(ValueError, match="alpha must be None"):
+        tf.patch_radiance(mat, 0.2, 0.3)
+    with pytest.raises(ValueError, match="method"):
+        tf.envmap_radiance(lam, None, n, v, np.ones((8, 16, 3)), method="ideal")
+    with pytest.raises(TypeError, match="Film, Stack, Material or CarPaint"):
+        tf.patch_radiance("film", 0.2, 0.3)

@@ -52,8 +52,8 @@ the bilinear read is within 2e-3 of the exact Ŝ and about 10× cheaper on a CPU
 for the K bins.
 ``"exact"`` and ``"gaussian"`` are as for `filtered_kernel`.
 
-**Under an environment** (`methods.improved.improved_envmap`, called by `envmap_radiance`) the light L(ω_i)
-weights the lobe, and the film–light coupling is what a split-sum method loses: a bright
+**Under an environment** (`shading.methods.improved.improved_envmap`, called by
+`envmap_radiance`) the light L(ω_i) weights the lobe, and the film–light coupling is what a split-sum method loses: a bright
 source at one c. The same bins split it exactly,
 
 $$ L_j = A\,\mathbb E_{p_R}\big[R(c)\,L(\omega_i)\big]

@@ -58,6 +58,8 @@ is resampled by 8 at α = 0.25 unless `max_height=None`):
 from __future__ import annotations
 
 import functools
+import os
+import sys
 import warnings
 
 import jax
@@ -191,7 +193,7 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
             f"envmap_radiance(method='reference'): the {h} × {2 * h} map is resampled by "
             f"{f} to {h // f} × {2 * h // f} (solid-angle-exact box filter; texel "
             f"{f * 180 / h:.2f}° ≤ α_min/8 rad = {np.degrees(a_min / 8):.2f}°); pass "
-            "max_height=None to integrate every texel", stacklevel=3)
+            "max_height=None to integrate every texel", stacklevel=_user_stacklevel())
         env = downsample(env, f)
         h = env.shape[0]
     if subdivisions is None:
@@ -249,7 +251,20 @@ def _warn_unresolved_lobes(alpha, normal, view, spacing: float) -> None:
             f"is narrower than twice the quadrature's node spacing ({spacing:.2g} rad): the "
             "reference is not converged there (errors of 1e-2 and more at θ_o ≥ 88° with "
             "α ≤ 0.1); method='mc' is unbiased there", int(np.sum(bad)), bad.size),
-            stacklevel=4)
+            stacklevel=_user_stacklevel())
+
+
+def _user_stacklevel() -> int:
+    """The `warnings.warn` stack level of the first frame outside the package (the user's
+    call), however many of the package's frames (entry point, kind and method dispatch) lie
+    between it and the function that warns (`functools.singledispatch`'s frame counts as the
+    package's)."""
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    internal = (package, os.path.abspath(functools.__file__))
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(internal):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def _same(x) -> bool:

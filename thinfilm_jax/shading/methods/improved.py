@@ -204,8 +204,8 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
 class _Reads(NamedTuple):
     """`bin_radiance_parts`'s reads, pooled per bin: radiance (K, ..., 3), the read moments
     (R, ..., 3 or 9), ⟨ω_o, μ⟩ under the light and under uniform light (K, ...), ⟨ω_o, d⟩
-    (R, ...), ω_o's components, the reads per bin g, and the functions that interpolate a kernel moment
-    between the read's levels and pool a read quantity per bin by luminance."""
+    (R, ...), ω_o's components, the reads per bin g, and the functions that interpolate a
+    kernel moment between the read's levels and pool a read quantity per bin by luminance."""
 
     radiance: Array
     moments: Array

@@ -131,3 +131,5 @@ def test_material_kinds_by_type():
         tf.envmap_radiance(lam, None, n, v, np.ones((8, 16, 3)), method="ideal")
     with pytest.raises(TypeError, match="Film, Stack, Material or CarPaint"):
         tf.patch_radiance("film", 0.2, 0.3)
+    with pytest.raises(TypeError, match="needs alpha"):
+        tf.envmap_radiance(film, None, n, v, np.ones((8, 16, 3)))

@@ -169,6 +169,9 @@ def _film_envmap(film, alpha, normal, view, envmap, method, observer, kw, kind_o
     if kind_options:
         raise TypeError(f"envmap_radiance of a film or stack got unexpected keyword arguments "
                         f"{sorted(kind_options)}")
+    if alpha is None:
+        raise TypeError("envmap_radiance of a Film or Stack needs alpha, the GGX roughness "
+                        "α ∈ (0, 1]")
     V.check_choice("method", method, method_names("envmap"))
     V.check_choice("observer", observer, OBSERVERS)
     path = material_path(film, method)

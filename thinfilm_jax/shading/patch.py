@@ -141,6 +141,9 @@ def _no_kind_options(kind_options):
 def _film_patch(film, theta_o, alpha, method, kw, kind_options):
     """A `Film` or `Stack`: the path `core.methods.material_path` picks."""
     _no_kind_options(kind_options)
+    if alpha is None:
+        raise TypeError("patch_radiance of a Film or Stack needs alpha, the GGX roughness "
+                        "α ∈ (0, 1]")
     observer, options, lut, batch_size = kw["observer"], kw["options"], kw["lut"], \
         kw["batch_size"]
     V.check_choice("method", method, method_names("patch"))

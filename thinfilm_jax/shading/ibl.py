@@ -72,7 +72,6 @@ from .colour_table import ColourTable
 from .envmap import EnvMap, load_envmap
 from .ibl_integrand import _interp, _lobe_cos_weight, _r_table, texel_nodes  # noqa: F401 (re-exported)
 from .ibl_reference import auto_subdivisions, exact_radiance  # noqa: F401 (re-exported)
-from .ibl_reference import check_directions as _check_directions
 from .material_ibl import METHODS as MATERIAL_METHODS
 from .material_ibl import material_envmap_radiance
 from .methods import DEFAULT_SOURCES  # noqa: F401 (re-exported)
@@ -220,7 +219,7 @@ def _one_film_envmap(film, alpha, normal, view, envmap, method, observer, *, opt
         raise ValueError("envmap_radiance has no bare-interface path (ModelOptions.layer): "
                          "use layer='auto' or 'film'")
     terms, shat = options.terms, options.shat
-    _check_directions(normal, view)
+    V.check_directions(normal, view)
     shape = V.check_broadcast([("film", np.zeros(film.shape)), ("alpha", alpha),
                                ("normal", np.zeros(np.shape(normal)[:-1])),
                                ("view", np.zeros(np.shape(view)[:-1]))])

@@ -275,26 +275,13 @@ def _same(x) -> bool:
     return a.size == 0 or bool(np.all(a == a.flat[0]))
 
 
-def check_directions(normal, view):
-    """normal and view: (..., 3), finite unit vectors (concrete)."""
-    for name, v in (("normal", normal), ("view", view)):
-        if np.shape(v)[-1:] != (3,):
-            raise ValueError(f"{name} must have shape (..., 3), got {np.shape(v)}")
-        if V.is_concrete(v):
-            V.check_finite(name, v)
-            nrm = np.linalg.norm(np.asarray(v, float), axis=-1)
-            if np.any(np.abs(nrm - 1) > 1e-3):
-                raise ValueError(f"{name} must be unit vectors; got a norm of "
-                                 f"{nrm.flat[np.argmax(np.abs(nrm - 1))]:.6g}")
-
-
 def exact_stack_envmap(material, alpha, normal, view, envmap, method, observer, kw):
     """`reference` / `mc` of a `Stack` or a dispersive `Film` (`envmap_radiance`'s keywords
     `kw`): validated, broadcast, then `exact_radiance` on the stack code (complex by nature;
     its thicknesses may vary per point, its indices are shared)."""
     stack = V.check_material(material, wavelengths=get_observer(observer).wavelengths)
     V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-    check_directions(normal, view)
+    V.check_directions(normal, view)
     shape = V.check_broadcast([("film", np.zeros(batch_shape(stack))), ("alpha", alpha),
                                ("normal", np.zeros(np.shape(normal)[:-1])),
                                ("view", np.zeros(np.shape(view)[:-1]))])

@@ -29,7 +29,6 @@ from ...spectral.spectra import get_observer
 from ...spectral.uplift import cross_band_name
 from ..envmap import EnvMap, load_envmap
 from ..ibl_integrand import _interp, _r_table
-from ..ibl_reference import check_directions
 from ..prefilter import PrefilteredEnvMap, lookup_albedo, lookup_radiance, prefilter_envmap
 from . import SplitSum
 
@@ -71,7 +70,7 @@ def tabulated_ideal(material, alpha, normal, view, envmap, observer, kw):
         raise ValueError("method='ideal' tabulates one homogeneous material: its thicknesses "
                          "must not vary per point (use method='reference', or vmap)")
     V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-    check_directions(normal, view)
+    V.check_directions(normal, view)
     shape = V.check_broadcast([("alpha", alpha), ("normal", np.zeros(np.shape(normal)[:-1])),
                                ("view", np.zeros(np.shape(view)[:-1]))])
     pref = envmap

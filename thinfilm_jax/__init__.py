@@ -126,8 +126,4 @@ from .optics.materials import MONOLAYER_NM as MONOLAYER_NM
 from .fit.raw_spectrum import Envelope as Envelope
 from .fit.spectrum_file import read_spectrum as read_spectrum
 
-# executable method registry: one module per method, material kinds by type (core/methods.py)
-from .realtime.improved import ImprovedOptions as ImprovedOptions
-from .shading.methods import ShadingMethod as ShadingMethod
-
 __version__ = "0.2.0"

@@ -50,7 +50,8 @@ class Improved(ShadingMethod):
     default_sources = DEFAULT_SOURCES
 
     def patch_tables(self, options, dtype):
-        return bin_table(options.bins, ndf=options.ndf, dtype=dtype)
+        """The (θ_o, α) table of its K bins (under uniform light only K acts)."""
+        return bin_table(options.improved.bins, ndf=options.ndf, dtype=dtype)
 
     def patch_point(self, film, theta_o, alpha, quad, *, observer, options, lut, table):
         o = options
@@ -67,10 +68,11 @@ class Improved(ShadingMethod):
 
     def envmap_tables(self, pref, options, dtype):
         """The map and the (θ_o, α) tables of its reads (they travel together)."""
-        return pref, bin_table(options.bins, reads=options.bin_reads, dtype=dtype)
+        own = options.improved  # `ImprovedOptions`: K, reads a bin, light spread
+        return pref, bin_table(own.bins, reads=own.bin_reads, dtype=dtype)
 
     def map_static(self, options):
-        return options.light_spread
+        return options.improved.light_spread
 
     def prefiltered(self, pref):
         return pref[0]

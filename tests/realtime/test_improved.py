@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from thinfilm_jax import Film, ModelOptions, patch_radiance
-from thinfilm_jax.realtime.improved import (_bin_stats, bin_table, improved_bands, improved_bins,
-                                   improved_kernel)
+from thinfilm_jax.realtime.improved import bin_table, improved_bands, improved_bins, improved_kernel
+from thinfilm_jax.realtime.improved_table import _bin_stats
 from thinfilm_jax.realtime.kernels import ideal_kernel
 from thinfilm_jax.spectral.lut import build_shat_lut, lookup
 from thinfilm_jax.brdf.microfacet import patch_quadrature

@@ -71,7 +71,7 @@ def test_improved_beats_filtered_under_many_small_sources(lamps):
 
 def test_light_spread_under_many_small_sources(lamps):
     """`ModelOptions(light_spread=True)`: each bin's spread of cos θ₁ follows the second
-    moments of its read's light (`prefilter.bin_radiance_parts`). On this map (no study map
+    moments of its read's light (`methods.improved.bin_radiance_parts`). On this map (no study map
     chose it) measured (float64): 2.520 mean ΔE₀₀ against 2.604 without; asserted: lower by
     at least half that gain (0.04). Mutation: the uniform-light variance without its
     −m₁²x_d² term gives 2.667, worse than without the option."""
@@ -102,7 +102,7 @@ def test_bin_reads_are_the_uniform_model_under_constant_light():
     """With g reads a bin, bin k reads the kernels gk … gk + g − 1 of the g·K fitted to the
     lobe (`bin_table(reads=g)`: the reads of ``bin_table(g·K)``); their radiance is averaged,
     their light's mean direction and second moments pooled by luminance
-    (`prefilter.bin_radiance_parts`). Under L ≡ 1 the pooled moments are the uniform ones to
+    (`methods.improved.bin_radiance_parts`). Under L ≡ 1 the pooled moments are the uniform ones to
     within the prefilter's resolution, so no bin moves (shifts exactly 0, spreads exactly
     s_k) and the map path is the uniform-light patch to the bound of one read a bin (1.2e-4,
     tests/shading/test_ibl.py; measured 7.2e-5 for g = 1, 2, 3 over α ∈ {0.1, 0.25, 0.6})."""
@@ -110,7 +110,7 @@ def test_bin_reads_are_the_uniform_model_under_constant_light():
     from thinfilm_jax.shading.envmap import load_envmap
     from thinfilm_jax.shading.patch import patch_radiance
     from _geometry import front_facing
-    from thinfilm_jax.shading.prefilter import bin_radiance_parts
+    from thinfilm_jax.shading.methods.improved import bin_radiance_parts
 
     film = Film(600.0, 1.3, 2.0, 0.5)
     constant = prefilter_envmap(load_envmap(np.ones((64, 128, 3))))

@@ -121,7 +121,7 @@ def test_constant_environment_reproduces_patch(alpha, constant):
 def test_light_spread_is_the_uniform_model_under_constant_light(constant):
     """`ModelOptions(light_spread=True)` scales each bin's spread by the ratio of its read's
     light-weighted variance of x = ⟨ω_o, ω_i⟩ to the kernel's, ½(1 − m₂) + ½(3m₂ − 1)x_d² −
-    m₁²x_d² (`prefilter.bin_radiance_parts`). Under L ≡ 1 the prefiltered second moments
+    m₁²x_d² (`methods.improved.bin_radiance_parts`). Under L ≡ 1 the prefiltered second moments
     give that variance to within 5.4e-4 (measured here; 7.2e-4 over 4,000 points; the
     tolerance `VARIANCE_RESOLUTION` is 1e-3), so every spread is the uniform-light s_k
     exactly (without the tolerance they move) and the radiance is the option's absence to
@@ -130,7 +130,7 @@ def test_light_spread_is_the_uniform_model_under_constant_light(constant):
     direction is the disc; asserted < 0.5)."""
     from thinfilm_jax.realtime.improved import bin_table, lookup_bins
     from _geometry import front_facing
-    from thinfilm_jax.shading.prefilter import bin_radiance_parts
+    from thinfilm_jax.shading.methods.improved import bin_radiance_parts
 
     rng = np.random.default_rng(3)
     n, v = front_facing(rng, 400)
@@ -627,7 +627,7 @@ def test_explicit_options_equal_to_the_default_give_the_default_program(constant
     here, not the exact quadrature that made it 9-14x slower a point), while another K is
     another program whose (θ_o, α) tables are built once, not per call. Without timing: the
     lowered HLO text of the real-time entry, and the bin tables' cache counts."""
-    from thinfilm_jax.realtime import improved
+    from thinfilm_jax.realtime import improved_table
     from thinfilm_jax.realtime.options import check_options
     from thinfilm_jax.shading import ibl
 
@@ -646,7 +646,7 @@ def test_explicit_options_equal_to_the_default_give_the_default_program(constant
     assert hlo(options=ModelOptions()) == default
     assert hlo(options=ModelOptions(shat="exact")) != default  # an explicit choice holds
     hlo(options=ModelOptions(bins=2))
-    before = improved._bin_table_cached.cache_info()
+    before = improved_table._bin_table_cached.cache_info()
     assert hlo(options=ModelOptions(bins=2)) != default
-    after = improved._bin_table_cached.cache_info()
+    after = improved_table._bin_table_cached.cache_info()
     assert after.misses == before.misses and after.hits > before.hits

@@ -353,3 +353,17 @@ def check_quadrature(value, name: str = "quadrature") -> tuple[int, int]:
     except (TypeError, ValueError) as e:
         raise ValueError(f"{name} must be a pair (n_u >= 1, n_phi >= 2) of ints, got "
                          f"{value!r}") from e
+
+
+def check_directions(normal, view) -> None:
+    """normal and view of an environment-map call: (..., 3), finite unit vectors (checked
+    where concrete; a norm off 1 by more than 1e-3 is refused)."""
+    for name, v in (("normal", normal), ("view", view)):
+        if np.shape(v)[-1:] != (3,):
+            raise ValueError(f"{name} must have shape (..., 3), got {np.shape(v)}")
+        if is_concrete(v):
+            check_finite(name, v)
+            nrm = np.linalg.norm(np.asarray(v, float), axis=-1)
+            if np.any(np.abs(nrm - 1) > 1e-3):
+                raise ValueError(f"{name} must be unit vectors; got a norm of "
+                                 f"{nrm.flat[np.argmax(np.abs(nrm - 1))]:.6g}")

@@ -14,7 +14,7 @@ float32 (every contraction states its precision).
   LUT, the exact quadrature or the Gaussian fit.
 * `improved_kernel` — this library's improved model (`improved`, docs/improved.md): K 29 per
   equal-probability bin of cos θ₁, the bins read from a (θ_o, α) table (`bin_table`);
-  `envmap_radiance` calls it through `ibl.improved_envmap`.
+  `envmap_radiance` calls it through `methods.improved.improved_envmap`.
 * `lobe_moments` — exact A(θ_o, α), μ_ω, Σ_ω of p_R ∝ ρ̃ ⟨n, ω_i⟩ (K 12, uniform light) in
   the frame n = z, ω_o = (sin θ_o, 0, cos θ_o), from the half-vector quadrature.
 

@@ -17,6 +17,10 @@ library's: each name means one thing everywhere.
 | ``light_spread`` | bool (False) | `improved` under a map: bins' spreads follow the light |
 | ``bin_reads`` | int ≥ 1 (1) | `improved` under a map: prefiltered reads per bin |
 
+The last three belong to `improved` (`realtime.improved.ImprovedOptions`, checked there;
+``options.improved`` gives them as one record): `ModelOptions` is the combined object users
+pass, each method reads the fields it owns.
+
 ``shat="auto"`` (the default) is each entry point's own default: "exact" under uniform
 light (`patch_radiance`, the fits) and "lut" under a map (`envmap_radiance`: the
 prefiltered map's table), so that ``ModelOptions(bins=2)`` changes K only, and an options
@@ -34,11 +38,11 @@ the keyword ``observer=`` of every public function (SPEC §8).
 default) ≈ 2.3× and K = 4 ≈ 2.9×, with the error falling as K grows. Each K builds its own
 (θ_o, α) table once (≈ 15 s on a 2-core CPU, then cached with the compiled programs).
 ``light_spread=True`` also reads each bin's light-weighted spread of the incidence cosine
-from the prefiltered second moments (`prefilter.bin_radiance_parts`): ≈ 1.18× the cost of
+from the prefiltered second moments (`methods.improved.bin_radiance_parts`): ≈ 1.18× the cost of
 `improved` under a map for ≈ 6 % lower mean ΔE₀₀ over the small-sources study's renders
 (docs/studies/improved.md, "Choosing K"); under uniform light it changes nothing.
 ``bin_reads=g`` gives each of `improved`'s K bins g prefiltered reads instead of one (the
-g·K kernels fitted to the lobe, `improved.bin_table(reads=g)`; `prefilter.bin_radiance_parts`
+g·K kernels fitted to the lobe, `improved.bin_table(reads=g)`; `methods.improved.bin_radiance_parts`
 pools them): narrower kernels that follow each bin's part of the lobe, for maps of many
 small bright sources. It costs ≈ 55 ns a read a point on a 2-core CPU (g = 3: ≈ 2× the
 default); its measured errors are in docs/studies/improved.md, "Choosing K". Under uniform
@@ -73,7 +77,7 @@ from typing import NamedTuple
 
 from ..core import _validate as V
 from .filtered import SHAT_SOURCES
-from .improved import DEFAULT_BINS
+from .improved import DEFAULT_BINS, ImprovedOptions
 from ..brdf.microfacet import DEFAULT_QUADRATURE, NDFS
 from ..spectral.reflectance import LAYERS
 
@@ -112,13 +116,17 @@ class ModelOptions(NamedTuple):
         V.check_choice("ndf", self.ndf, NDFS)
         V.check_choice("arithmetic", self.arithmetic, ARITHMETIC_CHOICES)
         V.check_choice("layer", self.layer, LAYERS)
-        if not isinstance(self.light_spread, bool):
-            raise ValueError(f"light_spread must be True or False, got {self.light_spread!r}")
+        improved = self.improved.checked()  # the fields `improved` owns, checked there
         return self._replace(shat=shat_auto if self.shat == "auto" else self.shat,
                              terms=V.check_int("terms", self.terms, 0),
                              quadrature=V.check_quadrature(self.quadrature),
-                             bins=V.check_int("bins", self.bins, 1),
-                             bin_reads=V.check_int("bin_reads", self.bin_reads, 1))
+                             bins=improved.bins, bin_reads=improved.bin_reads)
+
+    @property
+    def improved(self) -> ImprovedOptions:
+        """The options of `method="improved"` (`realtime.improved.ImprovedOptions`):
+        ``bins``, ``bin_reads`` and ``light_spread``."""
+        return ImprovedOptions(self.bins, self.bin_reads, self.light_spread)
 
 
 def check_options(options, shat_auto: str = "exact") -> ModelOptions:

@@ -61,6 +61,7 @@ import numpy as np
 from ..brdf import carpaint as C
 from ..brdf import ndf as _ndf
 from ..core import _validate as V
+from ..core.methods import implementation
 from .envmap import EnvMap, load_envmap, lookup_nearest
 from .ibl_integrand import _local_frame, texel_nodes
 from .ibl_reference import auto_subdivisions
@@ -192,7 +193,7 @@ def _mc_point(paint, n, wo, rad, key, n_samples):
 # ----------------------------------------------------------------------------- env map
 @functools.partial(jax.jit, static_argnums=(5,))
 def _ibl_jit(paint, normal, view, radiance, extra, cfg):
-    method, batch, n_samples = cfg
+    mc, batch, n_samples = cfg
     dt = normal.dtype
     shape = normal.shape[:-1]
     flat = [x.reshape(-1, 3) for x in (normal, view)]
@@ -204,7 +205,7 @@ def _ibl_jit(paint, normal, view, radiance, extra, cfg):
         f = C._fresnel_coat(c, C._cos_inside(c, paint.coat_ior), paint.coat_ior)
         return f * lookup_nearest(radiance, wr)
 
-    if method == "reference":
+    if not mc:  # the texel quadrature: extra = its nodes and their light
         dirs, light = extra
 
         def one(xs):
@@ -259,7 +260,8 @@ def paint_envmap_radiance(paint: C.CarPaint, normal, view, envmap, *, method: st
     rad = env.radiance.astype(dt)
     h, w = env.shape
     n_pts = int(np.prod(shape))
-    if method == "reference":
+    mc = implementation(method).monte_carlo
+    if not mc:
         alpha = paint.lobe_alpha if paint.lobe_alpha.shape[0] else 1.0
         s = auto_subdivisions(h, alpha) if subdivisions is None \
             else V.check_int("subdivisions", subdivisions, 1)
@@ -273,5 +275,5 @@ def paint_envmap_radiance(paint: C.CarPaint, normal, view, envmap, *, method: st
     if batch_size is None:
         batch_size = max(1, 2**19 // max(per_point, 1))
     batch = int(max(1, min(V.check_int("batch_size", batch_size, 1), max(n_pts, 1))))
-    out, err = _ibl_jit(_cast(paint, dt), normal, view, rad, extra, (method, batch, n_samples))
+    out, err = _ibl_jit(_cast(paint, dt), normal, view, rad, extra, (mc, batch, n_samples))
     return (out, err) if return_stderr else out

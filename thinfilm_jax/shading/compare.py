@@ -32,11 +32,13 @@ from ..core import _validate as V
 from ..core.film import Film
 from ..core.material import is_dispersive
 from ..core.methods import METHODS as METHOD_INFO
+from ..core.methods import implementation
+from ..core.methods import names as method_names
 from ..spectral.colorimetry import delta_e2000
 from ..spectral.spectra import DEFAULT_OBSERVER
 from .colour_table import prefilter_colour
 from .envmap import EnvMap, load_envmap
-from .ibl import DEFAULT_SOURCES, METHODS, envmap_radiance
+from .ibl import DEFAULT_SOURCES, METHODS, envmap_radiance  # noqa: F401 (re-exported)
 from .prefilter import PrefilteredEnvMap, prefilter_envmap
 
 #: What `compare_methods` runs by default: the reference and the real-time methods (Monte
@@ -94,7 +96,7 @@ def compare_methods(film: Film, alpha, normal, view, envmap, *,
     """
     methods = tuple(methods)
     for m in methods + (reference,):
-        V.check_choice("method", m, METHODS)
+        V.check_choice("method", m, method_names("envmap"))
     if isinstance(envmap, PrefilteredEnvMap):
         raise ValueError("compare_methods prepares every method's input from one EnvMap: "
                          "pass the map itself, not a PrefilteredEnvMap")
@@ -103,7 +105,7 @@ def compare_methods(film: Film, alpha, normal, view, envmap, *,
     maps: dict = {}  # suns split → PrefilteredEnvMap, built once
     radiance, split, skipped = {}, {}, {}
     for m in order:
-        if m == "colour_table":
+        if implementation(m).envmap_kind == "table":  # a table built for this film
             why = _colour_table_refusal(film, alpha)
             if why:
                 skipped[m] = why
@@ -117,7 +119,7 @@ def compare_methods(film: Film, alpha, normal, view, envmap, *,
         if METHOD_INFO[m].exact:
             source, n = env, None
         else:
-            n = sources if sources is not None else (DEFAULT_SOURCES if m == "improved" else 0)
+            n = sources if sources is not None else implementation(m).default_sources
             if n not in maps:
                 maps[n] = prefilter_envmap(env, observer=observer, sources=n,
                                            **(prefilter or {}))

@@ -58,13 +58,20 @@ is resampled by 8 at α = 0.25 unless `max_height=None`):
 from __future__ import annotations
 
 import functools
+import os
+import sys
 import warnings
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .envmap import EnvMap, downsample, lookup_nearest
+from ..core import _validate as V
+from ..core.material import batch_shape
+from ..core.methods import implementation
+from ..spectral.spectra import get_observer
+from .envmap import EnvMap, downsample, load_envmap, lookup_nearest
+from .prefilter import PrefilteredEnvMap
 from .ibl_adaptive import adaptive_radiance
 from .ibl_integrand import (HIGHEST, _contract, _interp, _local_frame, _lobe_cos_weight, _r_table,
                             _vndf_sample, texel_nodes)
@@ -103,14 +110,14 @@ def resample_factor(height: int, alpha_min: float, max_height: int | None) -> in
 def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
     """extra: (node directions, node weight × radiance) for the exhaustive reference, a key
     for MC."""
-    method, observer, s, n_cos, cross, arithmetic, batch, one_film = cfg
+    mc, observer, s, n_cos, cross, arithmetic, batch, one_film = cfg
     dtype = alpha.dtype
     obs = cross_band_name(observer) if cross else observer
     shape = alpha.shape
     mat, point = point_split(film, shape)
     flat = (mat, alpha.reshape(-1), normal.reshape(-1, 3), view.reshape(-1, 3))
     n_pts = flat[1].shape[0]
-    if method == "reference":
+    if not mc:  # the exhaustive texel rule: extra = its nodes
         dirs, e = extra
         # one film for every shading point: its R_jk(cos θ₁) table is built once, not per point
         shared_table = (_r_table(point(first_point(mat)), obs, n_cos, arithmetic, dtype)
@@ -120,7 +127,7 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
 
     def one(xs):
         f, a, n, wo = point(xs[0]), xs[1], xs[2], xs[3]
-        if method == "reference":
+        if not mc:
             wgt, c = _lobe_cos_weight(dirs, n, wo, a)  # (N,)
             table = shared_table if one_film else _r_table(f, obs, n_cos, arithmetic, dtype)
             r = _interp(table, c)  # (N, J[·3])
@@ -144,7 +151,7 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
             light = wgt[:, None] * lookup_nearest(radiance, wi)
         return _contract(r, light, cross)
 
-    xs = flat + ((keys,) if method == "mc" else ())
+    xs = flat + ((keys,) if mc else ())
     out = jax.lax.map(one, xs, batch_size=batch)
     cos_o = jnp.sum(normal * view, -1)
     return jnp.where((cos_o > 0)[..., None], out.reshape(*shape, out.shape[-1]), 0.0)
@@ -161,7 +168,8 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
                    arithmetic, one_film=False, subdivisions=None, n_cos=1024, n_samples=4096,
                    key=None, batch_size=None, exhaustive=False, return_estimate=False,
                    max_height: int | None = 256, refine=None):
-    """`reference` / `mc` of `envmap_radiance` on broadcast inputs (validated by the caller):
+    """`reference` / `mc` (`method`, whose object says which rule: ``monte_carlo``) of
+    `envmap_radiance` on broadcast inputs (validated by the caller):
     film fields and alpha of one shape, normal and view (..., 3) of that shape. `one_film`:
     every point has the same film (its R_jk table is built once); also detected here for
     concrete fields whose entries are all equal. `refine`: (K, K₃) of the adaptive rule
@@ -170,11 +178,11 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
     n_pts = int(np.prod(alpha.shape))
     one_film = bool(one_film) or (not isinstance(film, Stack)
                                   and all(_same(x) for x in jax.tree.leaves(film)))
-    if method == "mc":
+    if implementation(method).monte_carlo:
         if not (isinstance(n_samples, int) and n_samples >= 1):
             raise ValueError(f"n_samples must be a positive int, got {n_samples!r}")
         key = jax.random.key(0) if key is None else key
-        cfg = ("mc", observer, int(n_samples), 0, bool(cross_band), arithmetic,
+        cfg = (True, observer, int(n_samples), 0, bool(cross_band), arithmetic,
                _batch(batch_size, n_pts, n_samples * 64), False)
         return _exact_jit(film, alpha, normal, view, env.radiance.astype(dtype), key, cfg)
     a_min = float(np.min(np.asarray(alpha))) if _concrete(alpha) else 0.05
@@ -185,7 +193,7 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
             f"envmap_radiance(method='reference'): the {h} × {2 * h} map is resampled by "
             f"{f} to {h // f} × {2 * h // f} (solid-angle-exact box filter; texel "
             f"{f * 180 / h:.2f}° ≤ α_min/8 rad = {np.degrees(a_min / 8):.2f}°); pass "
-            "max_height=None to integrate every texel", stacklevel=3)
+            "max_height=None to integrate every texel", stacklevel=_user_stacklevel())
         env = downsample(env, f)
         h = env.shape[0]
     if subdivisions is None:
@@ -198,7 +206,7 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
     if exhaustive:
         d, wt, idx = texel_nodes(*env.shape, s)
         nodes = (jnp.asarray(d, dtype), jnp.asarray(wt, dtype)[:, None] * rad.reshape(-1, 3)[idx])
-        cfg = ("reference", observer, s, int(n_cos), bool(cross_band), arithmetic,
+        cfg = (False, observer, s, int(n_cos), bool(cross_band), arithmetic,
                _batch(batch_size, n_pts, len(wt)), one_film)
         out = _exact_jit(film, alpha, normal, view, rad, nodes, cfg)
         return (out, jnp.zeros(alpha.shape, dtype)) if return_estimate else out
@@ -243,7 +251,20 @@ def _warn_unresolved_lobes(alpha, normal, view, spacing: float) -> None:
             f"is narrower than twice the quadrature's node spacing ({spacing:.2g} rad): the "
             "reference is not converged there (errors of 1e-2 and more at θ_o ≥ 88° with "
             "α ≤ 0.1); method='mc' is unbiased there", int(np.sum(bad)), bad.size),
-            stacklevel=4)
+            stacklevel=_user_stacklevel())
+
+
+def _user_stacklevel() -> int:
+    """The `warnings.warn` stack level of the first frame outside the package (the user's
+    call), however many of the package's frames (entry point, kind and method dispatch) lie
+    between it and the function that warns (`functools.singledispatch`'s frame counts as the
+    package's)."""
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    internal = (package, os.path.abspath(functools.__file__))
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(internal):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 def _same(x) -> bool:
@@ -252,3 +273,27 @@ def _same(x) -> bool:
         return False
     a = np.asarray(x)
     return a.size == 0 or bool(np.all(a == a.flat[0]))
+
+
+def exact_stack_envmap(material, alpha, normal, view, envmap, method, observer, kw):
+    """`reference` / `mc` of a `Stack` or a dispersive `Film` (`envmap_radiance`'s keywords
+    `kw`): validated, broadcast, then `exact_radiance` on the stack code (complex by nature;
+    its thicknesses may vary per point, its indices are shared)."""
+    stack = V.check_material(material, wavelengths=get_observer(observer).wavelengths)
+    V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
+    V.check_directions(normal, view)
+    shape = V.check_broadcast([("film", np.zeros(batch_shape(stack))), ("alpha", alpha),
+                               ("normal", np.zeros(np.shape(normal)[:-1])),
+                               ("view", np.zeros(np.shape(view)[:-1]))])
+    if isinstance(envmap, PrefilteredEnvMap):
+        raise ValueError(f"method={method!r} integrates the map itself: pass an EnvMap, "
+                         "not a PrefilteredEnvMap")
+    env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
+    dtype = jnp.result_type(alpha, normal, view, float)
+    alpha = jnp.broadcast_to(jnp.asarray(alpha, dtype), shape)
+    nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
+    return exact_radiance(stack, alpha, *nv, env, method=method, observer=observer,
+                          cross_band=bool(kw["cross_band"]), arithmetic="complex",
+                          one_film=batch_shape(stack) == (), subdivisions=kw["subdivisions"],
+                          n_cos=kw["n_cos"], n_samples=kw["n_samples"], key=kw["key"],
+                          batch_size=kw["batch_size"], max_height=kw["max_height"])

@@ -56,6 +56,7 @@ import numpy as np
 
 from ..brdf import material as M
 from ..core import _validate as V
+from ..core.methods import implementation
 from ..optics.airy import choose_arithmetic
 from ..spectral.reflectance import spectral_bands
 from ..spectral.spectra import get_observer
@@ -139,7 +140,7 @@ def _per_sample(spec, diag, light, j):
 
 @functools.partial(jax.jit, static_argnums=(6,))
 def _ibl_jit(material, normal, view, tangent, radiance, extra, cfg):
-    method, spectral, n_cos, obs, arithmetic, batch, n_samples = cfg
+    mc, spectral, n_cos, obs, arithmetic, batch, n_samples = cfg
     dtype = normal.dtype
     j = get_observer(material.fresnel.observer).n_bands
     shape = normal.shape[:-1]
@@ -148,7 +149,7 @@ def _ibl_jit(material, normal, view, tangent, radiance, extra, cfg):
     if spectral and n_cos is not None:
         table = _r_table(material.fresnel.film, obs, n_cos, arithmetic, dtype)
     pcfg = (spectral, n_cos, obs, arithmetic)
-    if method == "reference":
+    if not mc:  # the texel quadrature: extra = its nodes and their light
         dirs, light = extra
 
         def one(xs):
@@ -234,7 +235,8 @@ def material_envmap_radiance(material: M.Material, normal, view, envmap, *, tang
     rad = env.radiance.astype(dtype)
     h, w = env.shape
     n_pts = int(np.prod(shape))
-    if method == "reference":
+    mc = implementation(method).monte_carlo
+    if not mc:
         s = auto_subdivisions(h, effective_alpha(material)) if subdivisions is None \
             else V.check_int("subdivisions", subdivisions, 1)
         d, wt, idx = texel_nodes(h, w, s)
@@ -247,6 +249,6 @@ def material_envmap_radiance(material: M.Material, normal, view, envmap, *, tang
     if batch_size is None:
         batch_size = max(1, 2**19 // max(per_point, 1))
     batch = int(max(1, min(int(batch_size), max(n_pts, 1))))
-    cfg = (method, spectral, n_cos, obs, arithmetic, batch, n_samples)
+    cfg = (mc, spectral, n_cos, obs, arithmetic, batch, n_samples)
     out, err = _ibl_jit(material, normal, view, tangent, rad, extra, cfg)
     return (out, err) if return_stderr else out

@@ -13,6 +13,12 @@ $$ L_j(\theta_o, \alpha) = \int \tilde\rho(\omega_i, \omega_o)\langle n, \omega_
 | ``improved``          | A · K 29 per equal-probability bin of cos θ₁ (`improved`, docs/improved.md) |
 | ``khr``               | A · glTF `F_iridescence`(cos θ_o) (SPEC §10, h = n): its linear Rec. 709 taken to the bands (`colorimetry.rec709_to_bands`) |
 
+Each method is one object of `shading.methods` (its module holds the row's formula), looked
+up in the registry (`core.methods.implementation`); the material's kind picks the path by
+type (`_patch_of`): a `Film` or `Stack` (one-film code, stack code or a dispersive film per
+band, `core.methods.material_path`), a classic-lobe `Material`
+(`material_patch.material_patch_radiance`) or a `CarPaint` (`carpaint_ibl.paint_patch_radiance`).
+
 A(θ_o, α) = Σ_n w_n is the prefiltered BRDF (exact quadrature, K 12). The quadrature
 (`microfacet.patch_quadrature`) is deterministic and film-independent; its convergence and
 the reference's accuracy are measured in tests/shading/test_patch.py. `patch_radiance_mc` is an
@@ -43,28 +49,27 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from ..brdf.carpaint import CarPaint
+from ..brdf.material import Material
+from ..brdf.microfacet import patch_quadrature, sample_patch_mc
 from ..core import _validate as V
-from ..core.material import batch_shape, is_dispersive, needs_stack, point_split
-from ..core.methods import METHODS as METHOD_INFO
+from ..core.film import Film
+from ..core.material import batch_shape, needs_stack, point_split
+from ..core.methods import implementation, material_path
 from ..core.methods import names as method_names
-from ..core.methods import require
 from ..core.stack import Stack
 from ..optics.airy import choose_arithmetic
-from ..core.film import Film
-from ..realtime.filtered import filtered_bands
-from ..realtime.improved import BinTable, bin_table, improved_kernel, lookup_bins
-from ..spectral.lut import ShatLUT, build_shat_lut
-from ..brdf.microfacet import (light_moments, patch_quadrature, sample_patch_mc,
-                         splitsum_light_moments, view_direction)
-from ..realtime.kernels import filtered_kernel, ideal_kernel
-from ..optics.opd import cos_incidence_from_projection, opd_moments_exact, project_light_moments
+from ..realtime.improved import BinTable
 from ..realtime.options import ModelOptions, check_options
-from ..spectral.khr import khr_bands, khr_to_bands
-from ..spectral.reflectance import (band_centroids, bare_bands, choose_layer, per_band,
-                                    spectral_bands, stack_bands)
+from ..spectral.lut import ShatLUT, build_shat_lut
+from ..spectral.reflectance import choose_layer, per_band, band_centroids, spectral_bands
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
+from .carpaint_ibl import paint_patch_radiance
+from .material_patch import material_patch_radiance
 
-METHODS = method_names("patch")  # the registry's order (core/methods.py)
+METHODS = method_names("patch")  # the built-in methods, the registry's order (core/methods.py)
+#: the methods of the material kinds that carry their own lobe (`Material`, `CarPaint`)
+KIND_METHODS = {Material: ("reference",), CarPaint: ("reference",)}
 
 
 def _check_patch_args(film, theta_o, alpha, method, observer, options):
@@ -77,7 +82,7 @@ def _check_patch_args(film, theta_o, alpha, method, observer, options):
         film = V.check_film(film)
     theta_o = V.check_angle("theta_o", theta_o)
     alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-    V.check_choice("method", method, METHODS)
+    V.check_choice("method", method, method_names("patch"))
     V.check_choice("observer", observer, OBSERVERS)
     options = check_options(options)
     shape = V.check_broadcast([("film", np.zeros(batch_shape(film))), ("theta_o", theta_o),
@@ -85,9 +90,9 @@ def _check_patch_args(film, theta_o, alpha, method, observer, options):
     return film, theta_o, alpha, options, shape
 
 
-def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
+def patch_radiance(film, theta_o, alpha=None, *, method: str = "reference",
                    observer: str = DEFAULT_OBSERVER, options: ModelOptions = ModelOptions(),
-                   lut: ShatLUT | None = None, batch_size: int = 64) -> Array:
+                   lut: ShatLUT | None = None, batch_size: int = 64, **kind_options) -> Array:
     """Band radiances L_j of a patch under uniform light, shape broadcast(...) + (n_bands,).
 
     The first call in a process compiles (XLA) for the shapes, dtypes and options given:
@@ -97,10 +102,13 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
     turn it on).
 
     Args:
-        film: `Film` (fields broadcast with theta_o and alpha).
+        film: the material, by type: a `Film` (fields broadcast with theta_o and alpha) or a
+            `Stack` (SPEC §12); a classic-lobe `Material` or a `CarPaint`, which carry their
+            own lobe (`alpha` None, method "reference"; `kind_options` go to
+            `material_patch_radiance` / `paint_patch_radiance`: tangent, quadratures).
         theta_o: view angle θ_o ∈ [0, π/2] (radians).
-        alpha: GGX roughness α ∈ (0, 1].
-        method: one of `METHODS` (SPEC §7).
+        alpha: GGX roughness α ∈ (0, 1] of a film or stack.
+        method: one of `core.methods.names("patch")` (SPEC §7).
         observer: colour bands of the result, for every method ("khr" computes glTF's
             linear Rec. 709 and returns it in these bands, `colorimetry.rec709_to_bands`).
         options: `ModelOptions` — terms (M of the non-reference methods; K 29 uses 2),
@@ -111,9 +119,47 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
         batch_size: patches evaluated together (memory of the reference is
             batch_size · n_u · n_φ · n_λ).
     """
-    if needs_stack(film):  # a Stack or a dispersive Film (SPEC §12)
-        return _material_patch(film, theta_o, alpha, method, observer, options, lut,
-                               batch_size)
+    return _patch_of(film, theta_o, alpha, method, dict(
+        observer=observer, options=options, lut=lut, batch_size=batch_size), kind_options)
+
+
+@functools.singledispatch
+def _patch_of(material, theta_o, alpha, method, kw, kind_options):
+    """`patch_radiance` by the material's type (one handler per kind)."""
+    raise TypeError(f"patch_radiance takes a thinfilm_jax Film, Stack, Material or CarPaint, "
+                    f"got {type(material).__name__}")
+
+
+def _no_kind_options(kind_options):
+    if kind_options:
+        raise TypeError(f"patch_radiance of a film or stack got unexpected keyword arguments "
+                        f"{sorted(kind_options)}")
+
+
+@_patch_of.register(Film)
+@_patch_of.register(Stack)
+def _film_patch(film, theta_o, alpha, method, kw, kind_options):
+    """A `Film` or `Stack`: the path `core.methods.material_path` picks."""
+    _no_kind_options(kind_options)
+    if alpha is None:
+        raise TypeError("patch_radiance of a Film or Stack needs alpha, the GGX roughness "
+                        "α ∈ (0, 1]")
+    observer, options, lut, batch_size = kw["observer"], kw["options"], kw["lut"], \
+        kw["batch_size"]
+    V.check_choice("method", method, method_names("patch"))
+    V.check_choice("observer", observer, OBSERVERS)
+    path = material_path(film, method)
+    if path == "bands":  # a dispersive single film at each band's centroid (SPEC §12)
+        V.check_material(film, wavelengths=band_centroids(observer))
+        return per_band(lambda f, t, a: patch_radiance(
+            f, t, a, method=method, observer=observer, options=options, lut=lut,
+            batch_size=batch_size), film, theta_o, alpha, observer=observer)
+    if path == "stack":  # every index at each of the observer's wavelengths
+        stack, theta_o, alpha, options, shape = _check_patch_args(film, theta_o, alpha, method,
+                                                                  observer, options)
+        batch_size = V.check_int("batch_size", batch_size, 1)
+        return _stack_patch_jit(stack, theta_o, alpha, (method, observer, options.quadrature,
+                                                        options.ndf, batch_size), shape)
     film, theta_o, alpha, options, shape = _check_patch_args(film, theta_o, alpha, method,
                                                              observer, options)
     batch_size = V.check_int("batch_size", batch_size, 1)
@@ -125,10 +171,25 @@ def patch_radiance(film: Film, theta_o, alpha, *, method: str = "reference",
         lut = build_shat_lut(observer, dtype=dtype)
     options = options._replace(arithmetic=choose_arithmetic(film, options.arithmetic),
                                layer=choose_layer(film, options.layer))
-    table = (bin_table(options.bins, ndf=options.ndf, dtype=dtype) if method == "improved"
-             else None)
+    table = implementation(method).patch_tables(options, dtype)  # host side, cached by value
     return _patch_jit(film, theta_o, alpha, (lut, table), (method, observer, options, batch_size),
                       shape)
+
+
+def _lobe_kind(fn):
+    """The handler of a material kind that carries its own lobe (no `alpha`, its methods
+    `KIND_METHODS`; observer, options, lut and batch_size are the films')."""
+    def handler(material, theta_o, alpha, method, kw, kind_options):
+        if alpha is not None:
+            raise ValueError(f"alpha must be None for a {type(material).__name__} (it carries "
+                             f"its own lobe), got {alpha!r}")
+        V.check_choice("method", method, KIND_METHODS[type(material)])
+        return fn(material, theta_o, **kind_options)
+    return handler
+
+
+_patch_of.register(Material, _lobe_kind(material_patch_radiance))
+_patch_of.register(CarPaint, _lobe_kind(paint_patch_radiance))
 
 
 @functools.partial(jax.jit, static_argnums=(4, 5))
@@ -146,27 +207,6 @@ def _patch_jit(film, theta_o, alpha, tables, cfg, shape):
 
     out = jax.lax.map(one, flat, batch_size=min(batch, max(math.prod(shape), 1)))
     return out.reshape(*shape, out.shape[-1])
-
-
-def _material_patch(material, theta_o, alpha, method, observer, options, lut, batch_size):
-    """`patch_radiance` of a `Stack` or a dispersive `Film`: exact methods evaluate every
-    index at each of the observer's wavelengths; "ideal" is A(θ_o, α) times the exact bands at
-    h = n (what a per-material table R_j(cos θ) gives an engine); the other real-time ones
-    take a dispersive single film at each band's centroid (`spectral.reflectance.per_band`);
-    the rest is a ValueError from the registry naming what the method lacks."""
-    V.check_choice("method", method, METHODS)
-    V.check_choice("observer", observer, OBSERVERS)
-    require(method, dispersive=is_dispersive(material), stack=isinstance(material, Stack))
-    if not METHOD_INFO[method].exact and method != "ideal":
-        V.check_material(material, wavelengths=band_centroids(observer))
-        return per_band(lambda f, t, a: patch_radiance(
-            f, t, a, method=method, observer=observer, options=options, lut=lut,
-            batch_size=batch_size), material, theta_o, alpha, observer=observer)
-    stack, theta_o, alpha, options, shape = _check_patch_args(material, theta_o, alpha, method,
-                                                              observer, options)
-    batch_size = V.check_int("batch_size", batch_size, 1)
-    return _stack_patch_jit(stack, theta_o, alpha, (method, observer, options.quadrature,
-                                                    options.ndf, batch_size), shape)
 
 
 @functools.partial(jax.jit, static_argnums=(3, 4))
@@ -188,87 +228,33 @@ def _stack_patch_jit(stack, theta_o, alpha, cfg, shape):
 def stack_patch_one(stack: Stack, theta_o, alpha, *, method: str, observer: str,
                     quadrature=ModelOptions().quadrature, ndf: str = "ggx") -> Array:
     """One patch of a `Stack` (one point: thickness (N,), scalar θ_o and α) → (J,): the
-    `reference` quadrature of the exact stack bands, or `ideal`'s A(θ_o, α) · R_j(cos θ_o)
-    (the exact bands at h = n). No validation (trace-safe)."""
+    method's `stack_patch_point` (`reference`: the quadrature of the exact stack bands;
+    `ideal`: A(θ_o, α) · R_j(cos θ_o), the exact bands at h = n). No validation (trace-safe)."""
     quad = patch_quadrature(theta_o, alpha, quadrature=quadrature, ndf=ndf)
-    if method == "ideal":
-        return jnp.sum(quad.weight) * stack_bands(stack, jnp.cos(theta_o), observer)
-    rj = stack_bands(stack, quad.cos_hi, observer)  # (N, J)
-    return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
+    return implementation(method).stack_patch_point(stack, theta_o, quad, observer)
 
 
 def patch_one(film: Film, theta_o, alpha, *, method: str, observer: str,
               options: ModelOptions = ModelOptions(shat="exact", arithmetic="complex",
                                                    layer="film"),
               lut=None, table: BinTable | None = None) -> Array:
-    """One patch (scalar film fields, θ_o, α) → (n_bands,). The kernel `patch_radiance` maps.
+    """One patch (scalar film fields, θ_o, α) → (n_bands,). The kernel `patch_radiance` maps:
+    the half-vector quadrature, then the method's `patch_point` (`shading.methods`).
 
     No validation (trace-safe); ``options.arithmetic`` must already be "real" or "complex"
-    and ``options.layer`` "film" or "bare"; method "improved" reads `table`
-    (`improved.bin_table`; None: the default table). A bare layer (d = 0) replaces each
-    method's band reflectance by the exact R₁₃ Ŝ_j(0) at the cosine that method evaluates:
-    the nodes c_n (reference), cos θ_o (ideal), cos θ₁* of K 22 (the filtered methods), the
-    bin means c̄_k (improved, averaged over the bins).
+    and ``options.layer`` "film" or "bare"; `table` is the method's `patch_tables` (None: the
+    method builds its default, e.g. `improved`'s `bin_table`). A bare layer (d = 0) replaces
+    each method's band reflectance by the exact R₁₃ Ŝ_j(0) at the cosine that method
+    evaluates: the nodes c_n (reference), cos θ_o (ideal), cos θ₁* of K 22 (the filtered
+    methods), the bin means c̄_k (improved, averaged over the bins); `khr`'s d = 0 is its own
+    formula.
     """
     o = options
     if o.shat == "auto":  # uniform light's default Ŝ source (`ModelOptions`), as patch_radiance
         o = o._replace(shat="exact")
     quad = patch_quadrature(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
-    if method == "khr":  # as `ideal`; its d = 0 is its own formula, not the bare base
-        rgb = jnp.sum(quad.weight) * khr_bands(film, jnp.cos(theta_o))  # linear Rec. 709
-        return khr_to_bands(rgb, observer)  # the bands, as every method
-    if o.layer == "bare":
-        return _bare_patch(film, theta_o, alpha, quad, method, observer, o, table)
-    if method == "reference":
-        rj = spectral_bands(film, quad.cos_hi, observer, arithmetic=o.arithmetic)  # (N, J)
-        return jnp.matmul(quad.weight, rj, precision=jax.lax.Precision.HIGHEST)
-    albedo = jnp.sum(quad.weight)
-    if method == "ideal":
-        return albedo * ideal_kernel(film, jnp.cos(theta_o), observer=observer, terms=o.terms,
-                                     shat="exact", arithmetic=o.arithmetic)
-    if method == "improved":
-        if table is None:  # the default table (host-built, cached; fine under jit too)
-            table = bin_table(o.bins, ndf=o.ndf, dtype=albedo.dtype)
-        return albedo * improved_kernel(film, jnp.cos(theta_o), alpha, table, observer=observer,
-                                        terms=o.terms, shat=o.shat, lut=lut,
-                                        arithmetic=o.arithmetic)
-    if method == "filtered":
-        mean, cov = splitsum_light_moments(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
-    else:
-        mean, cov = light_moments(quad)
-    wo = view_direction(theta_o)
-    if method == "filtered_gt_opd":
-        mu_c, _ = project_light_moments(wo, mean, cov)
-        opd = opd_moments_exact(film, quad.cos_hi, quad.weight)
-        return albedo * filtered_bands(film, cos_incidence_from_projection(mu_c), opd, observer,
-                                       terms=o.terms, shat=o.shat, lut=lut,
-                                       arithmetic=o.arithmetic)
-    return albedo * filtered_kernel(film, wo, mean, cov, observer=observer, terms=o.terms,
-                                    shat=o.shat, lut=lut, arithmetic=o.arithmetic)
-
-
-def _bare_patch(film, theta_o, alpha, quad, method, observer, o, table):
-    def bands(c):
-        return bare_bands(film, c, observer, shat="exact" if method == "reference" else o.shat,
-                          arithmetic=o.arithmetic)
-
-    if method == "reference":
-        return jnp.matmul(quad.weight, bands(quad.cos_hi), precision=jax.lax.Precision.HIGHEST)
-    albedo = jnp.sum(quad.weight)
-    if method == "ideal":
-        return albedo * bands(jnp.cos(theta_o))
-    if method == "improved":  # the mean over the bins' cosines c̄_k
-        if table is None:
-            table = bin_table(o.bins, ndf=o.ndf, dtype=albedo.dtype)
-        cb, _ = lookup_bins(table, jnp.cos(theta_o), alpha)
-        return albedo * jnp.mean(bands(cb), axis=-2)
-    if method == "filtered":
-        mean, cov = splitsum_light_moments(theta_o, alpha, quadrature=o.quadrature, ndf=o.ndf)
-    else:
-        mean, cov = light_moments(quad)
-    wo = view_direction(theta_o)
-    mu_c, _ = project_light_moments(wo, mean, cov)
-    return albedo * bands(cos_incidence_from_projection(mu_c))
+    return implementation(method).patch_point(film, theta_o, alpha, quad, observer=observer,
+                                              options=o, lut=lut, table=table)
 
 
 def patch_radiance_mc(film: Film, theta_o: float, alpha: float, key, *, n_samples: int = 100_000,

@@ -52,7 +52,7 @@ from ..core import _validate as V
 from .envmap import (EnvMap, bilinear_taps, downsample, load_envmap, luminance_weights,
                      read_taps, texel_centers, texel_solid_angles)
 from ..optics.fresnel import complex_dtype, safe_sqrt
-from ..realtime.improved import BinLight, _bilinear, lookup_lobe, lookup_reads
+from ..realtime.improved import _bilinear, lookup_lobe
 from ..spectral.lut import ShatLUT, build_shat_lut
 from ..brdf.microfacet import albedo, normal_distribution, smith_g2
 from .sources import Sources, extract_sources, with_film_tables
@@ -61,10 +61,10 @@ from ..spectral.uplift import cross_band_name
 
 MOMENTS = ("luminance", "per_channel")
 #: moves of ⟨ω_o, mean light direction⟩ below this are the prefilter's own error
-#: (`bin_radiance_parts`)
+#: (`methods.improved.bin_radiance_parts`)
 MOMENT_RESOLUTION = 1e-3
 #: moves of the variance of ⟨ω_o, ω_i⟩ below this are the prefilter's own error
-#: (`bin_radiance_parts`)
+#: (`methods.improved.bin_radiance_parts`)
 VARIANCE_RESOLUTION = 1e-3
 
 
@@ -337,133 +337,14 @@ def bin_radiance(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha):
     where the bins are rings round ω_o (near normal view, ring weight w of `BinTable.ring`)
     their mean is moved to the whole lobe's read, w (P − (1/K) Σ_k P_k). cos_o = ⟨n, ω_o⟩ > 0.
     (`colour_table` reads it; `envmap_radiance(method="improved")` reads
-    `bin_radiance_parts`, whose reads are fitted to the lobe instead: docs/improved.md.)"""
+    `methods.improved.bin_radiance_parts`, whose reads are fitted to the lobe instead:
+    docs/improved.md.)"""
     dirn, sqa_eff = lookup_lobe(table, normal, view, cos_o, alpha)  # (..., K + 1, 3), (..., K + 1)
     rad = lookup_radiance(pref, jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa_eff, -1, 0))
     k = rad.shape[0] - 1  # rad: (K + 1, ..., 3), the whole lobe's read last
     w = _bilinear(table.ring, safe_sqrt(cos_o), safe_sqrt(alpha))[..., None]
     shift = w * (rad[k] - sum(rad[b] for b in range(k)) * (1.0 / k))
     return jnp.moveaxis(rad[:k] + shift, 0, -2)
-
-
-def _incidence_cos(x):
-    """cos θ₁ = √((1 + ⟨ω_o, ω_i⟩)/2) of the mean ⟨ω_o, ω_i⟩ (K 22)."""
-    return safe_sqrt(jnp.clip((1.0 + x) * 0.5, 0.0, 1.0))
-
-
-def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha, spread, *,
-                       light_spread: bool = False):
-    r"""The light of the improved model's K bins (docs/improved.md): an `improved.BinLight`
-    (radiance (K, ..., 3), cosine shifts and, with `light_spread`, spreads (K, ...), bins
-    first: the layout `improved.scan_bins` steps through).
-
-    Read k is the prefiltered radiance P_k and the luminance-weighted moments of the light
-    direction, mean μ_k and second moment S_k (K §3.2; S_k only with `light_spread`), at the
-    tabulated direction d_k and level α_k (`improved.lookup_reads`: the K kernels fitted to
-    the lobe). They place bin k's film where the bin's light is, through x = ⟨ω_o, ω_i⟩
-    (c = √((1 + x)/2), K 22). Under uniform light the read's kernel, symmetric about d_k
-    with moments m₁, m₂ of ⟨d_k, ω_i⟩ (`BinTable.kernel_moments`, interpolated between the
-    levels as the read is), gives x the mean and variance
-
-    $$ \bar x_k = m_1 x_d,\qquad v_k = \tfrac12(1 - m_2) + \tfrac12(3m_2 - 1)\,x_d^2
-       - m_1^2 x_d^2,\qquad x_d = \langle\omega_o, d_k\rangle; $$
-
-    the light moves them to ⟨ω_o, μ_k⟩ and v^L_k = ω_oᵀS_kω_o − ⟨ω_o, μ_k⟩², and the bin
-    follows (the spread only with `light_spread`; else s'_k = s_k):
-
-    $$ \Delta c_k = \operatorname{clip}\big(c(\langle\omega_o,\mu_k\rangle) - c(\bar x_k),
-       \ \pm\sqrt3\,s_k\big),\qquad
-       s'_k = s_k\sqrt{\operatorname{clip}(v^L_k / v_k,\ 0,\ 4)}, $$
-
-    the shift clipped to the bin's width (a uniform bin of spread s_k spans ±√3 s_k), the
-    spread scaled as the read's light narrows or widens x (one bright texel: s' → 0, the film
-    at that texel's cosine; at most twice s_k: wider light belongs to the neighbouring bins,
-    which their own reads carry). The spread reads six more moment channels per read (the
-    second moments): ≈ 1.18× the cost of `improved` a point, for ≈ 6 % lower mean ΔE₀₀ over
-    the small-sources study's 18 renders (docs/studies/improved.md, "Choosing K"). Both
-    moves are shrunk by what the prefilter resolves (soft thresholds): a constant map's
-    read moments differ from the kernel's by ≤ 5.6e-4 in the mean (`MOMENT_RESOLUTION`)
-    and ≤ 7.2e-4 in the variance of x (`VARIANCE_RESOLUTION`;
-    64 × 128, 17 levels, random directions and levels, α = 0.05–0.5: the sampled kernel of
-    narrow levels and the bilinear read), so a constant environment gives Δc = 0 and s' = s,
-    the uniform-light model. Per-channel moments are combined weighted by each channel's
-    luminance. cos_o = ⟨n, ω_o⟩ > 0; `spread`: the bins' s_k (..., K)
-    (`improved.lookup_bins`, which the caller reads).
-
-    With g reads a bin (a table of ``bin_table(reads=g)``: R = g·K reads, sorted by their
-    incidence cosine, bin k served by reads gk … gk + g − 1; `ModelOptions.bin_reads`) the
-    bin's light is their pool: P_k the mean of their radiances, μ_k and S_k the
-    luminance-weighted means of their moments (each read's light is its kernel's share of
-    the bin), and the uniform-light x̄_k, v_k those of the g kernels pooled, i.e. the mean of
-    m₁x_d and of E[x²] less the pooled mean squared; g = 1 is the formulas above."""
-    dirn, sqa, view_cos = lookup_reads(table, normal, view, cos_o, alpha, view_cosines=True)
-    dirn, sqa = jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa, -1, 0)
-    rad, mom = _read_levels(pref, (pref.radiance, pref.moments), dirn, sqa,
-                            channels=(slice(None), slice(None if light_spread else 3)))
-    lum = [float(c) for c in luminance_weights()]
-
-    def luminance(v):  # components written out: a size-3 jnp.sum is a slow XLA:CPU kernel
-        return v[..., 0] * lum[0] + v[..., 1] * lum[1] + v[..., 2] * lum[2]
-
-    if pref.per_channel:  # (R, ..., 3 channels, 3 or 9): weight by each channel's luminance
-        y_sum = luminance(rad)[..., None]
-        y = rad * jnp.asarray(lum, rad.dtype) / jnp.where(y_sum > 0, y_sum, 1.0)
-        mom = jnp.sum(y[..., None] * mom, axis=-2)
-    g = rad.shape[0] // spread.shape[-1]  # reads per bin (`bin_table(reads=...)`)
-    # uniform light: m₁, m₂ of the two levels the read interpolates, with the read's weights
-    n_m = table.kernel_moments.shape[-1]
-    grid = jnp.linspace(0.0, 1.0, n_m, dtype=sqa.dtype)
-    i0, f = _level_lerp(pref, sqa)
-
-    def at_read(m):
-        m_levels = jnp.interp(pref.sqrt_alpha, grid, m)
-        return m_levels[i0] * (1 - f) + m_levels[i0 + 1] * f
-
-    m1 = at_read(table.kernel_moments[0])
-    x_d = jnp.moveaxis(view_cos, -1, 0)
-    vx, vy, vz = view[..., 0], view[..., 1], view[..., 2]
-    x_light = mom[..., 0] * vx + mom[..., 1] * vy + mom[..., 2] * vz  # ⟨ω_o, μ_r⟩
-    x_uniform = m1 * x_d
-    if g > 1:  # a bin's g reads: radiance and uniform moments averaged, light's by luminance
-        y = luminance(rad)
-        y_bin = _bin_mean(y, g)
-        lit = y_bin > 0
-        y_div = jnp.where(lit, y_bin, 1.0)
-
-        def light_mean(v):  # luminance-weighted over the bin's reads (plain mean if dark)
-            return jnp.where(lit, _bin_mean(y * v, g) / y_div, _bin_mean(v, g))
-
-        rad = _bin_mean(rad, g)
-        x_light, x_uniform = light_mean(x_light), _bin_mean(x_uniform, g)
-
-    def soft(d, tol):  # a move within the prefilter's resolution is no move
-        return jnp.sign(d) * jnp.maximum(jnp.abs(d) - tol, 0.0)
-
-    dx = soft(x_light - x_uniform, MOMENT_RESOLUTION)
-    s = jnp.moveaxis(spread, -1, 0)
-    lim = 3.0**0.5 * s
-    shift = jnp.clip(_incidence_cos(x_uniform + dx) - _incidence_cos(x_uniform), -lim, lim)
-    if not light_spread:
-        return BinLight(rad, shift)
-    m2 = at_read(table.kernel_moments[1])
-    xx, yy, zz, xy, yz, zx = (mom[..., c] for c in range(3, 9))
-    x2_light = (xx * vx * vx + yy * vy * vy + zz * vz * vz
-                + 2.0 * (xy * vx * vy + yz * vy * vz + zx * vz * vx))  # E_L⟨ω_o, ω_i⟩²
-    x2_uniform = 0.5 * (1.0 - m2) + 0.5 * (3.0 * m2 - 1.0) * x_d * x_d  # E_U⟨ω_o, ω_i⟩²
-    if g > 1:  # the bin's reads pooled, as their means above
-        x2_light, x2_uniform = light_mean(x2_light), _bin_mean(x2_uniform, g)
-    v_light = x2_light - x_light * x_light
-    v_uniform = x2_uniform - x_uniform * x_uniform
-    dv = soft(v_light - v_uniform, VARIANCE_RESOLUTION)
-    ok = v_uniform > 0
-    ratio = jnp.where(ok, (v_uniform + dv) / jnp.where(ok, v_uniform, 1.0), 1.0)
-    return BinLight(rad, shift, s * safe_sqrt(jnp.clip(ratio, 0.0, 4.0)))
-
-
-def _bin_mean(v, g):
-    """Means of `g` consecutive reads (R, ...) → (R / g, ...): bin k's reads are
-    gk … gk + g − 1 (`bin_table(reads=g)`: the R reads sorted by incidence cosine)."""
-    return sum(v[i::g] for i in range(g)) * (1.0 / g)
 
 
 def moments_to_mean_cov(m):

@@ -28,8 +28,8 @@ from ..core import _validate as V
 from ..core.methods import names as method_names
 from ..optics.airy import broadcast_all, choose_arithmetic, polarised_reflectance
 from ..core.film import Film
-from ..core.material import batch_shape, expand_batch, is_dispersive, needs_stack
-from ..core.methods import require
+from ..core.material import batch_shape, expand_batch
+from ..core.methods import material_path
 from ..core.stack import Stack
 from ..optics.stack import stack_reflectance_traced
 from ..optics.fresnel import film_interfaces
@@ -97,9 +97,9 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
     """
     V.check_choice("observer", observer, ("stiles_burch_1959_10", "cie_1931_2"))
     V.check_choice("method", method, METHODS)
-    if needs_stack(film):  # a Stack, or a Film with index models (SPEC §12)
-        require(method, dispersive=is_dispersive(film), stack=isinstance(film, Stack))
-        if method == "fourier":  # a dispersive single film: indices at each band's centroid
+    path = material_path(film, method)  # a Stack, or a Film with index models (SPEC §12)
+    if path != "film":
+        if path == "bands":  # a dispersive single film: indices at each band's centroid
             V.check_material(film, wavelengths=band_centroids(observer))
             return per_band(lambda f, c: rgb_reflectance(
                 f, c, observer=observer, method=method, terms=terms, shat=shat,
@@ -114,16 +114,26 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
     # any integer type (np.arange(...) elements too), not bool; a plain int for the jit cache
     terms = V.check_int("terms", terms, 0)
     V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta)])
-    if method == "khr":
-        for name, value, default in (("observer", observer, DEFAULT_OBSERVER),
-                                     ("terms", terms, 2), ("shat", shat, "exact")):
-            if value != default:
-                raise ValueError(f"method='khr' is the glTF extension's fixed formula (linear "
-                                 f"Rec. 709 RGB, M = 2): {name}={value!r} does not apply; "
-                                 f"leave {name} at its default {default!r}")
-        return _khr_jit(film, cos_theta)
-    return _rgb_jit(film, cos_theta, observer, method, terms, shat,
-                    choose_arithmetic(film, arithmetic), choose_layer(film, layer))
+    return _RGB_METHODS[method](film, cos_theta, observer, terms, shat, arithmetic, layer)
+
+
+def _khr_rgb(film, cos_theta, observer, terms, shat, arithmetic, layer):
+    """method="khr": glTF's fixed formula, its knobs checked to be at their defaults."""
+    for name, value, default in (("observer", observer, DEFAULT_OBSERVER),
+                                 ("terms", terms, 2), ("shat", shat, "exact")):
+        if value != default:
+            raise ValueError(f"method='khr' is the glTF extension's fixed formula (linear "
+                             f"Rec. 709 RGB, M = 2): {name}={value!r} does not apply; "
+                             f"leave {name} at its default {default!r}")
+    return _khr_jit(film, cos_theta)
+
+
+def _bands_rgb(method):
+    """method="spectral" / "fourier": the band integrals, specialised to the film."""
+    def run(film, cos_theta, observer, terms, shat, arithmetic, layer):
+        return _rgb_jit(film, cos_theta, observer, method, terms, shat,
+                        choose_arithmetic(film, arithmetic), choose_layer(film, layer))
+    return run
 
 
 @functools.partial(jax.jit, static_argnums=(2, 3, 4, 5, 6, 7))
@@ -131,9 +141,19 @@ def _rgb_jit(film, cos_theta, observer, method, terms, shat, arithmetic, layer):
     film, c = broadcast_all(film, cos_theta)
     if layer == "bare":
         return bare_bands(film, c, observer, shat=shat, arithmetic=arithmetic)
-    if method == "spectral":
-        return spectral_bands(film, c, observer, arithmetic=arithmetic)
-    return fourier_bands(film, c, observer, terms=terms, shat=shat, arithmetic=arithmetic)
+    return _BAND_FUNCTIONS[method](film, c, observer, terms, shat, arithmetic)
+
+
+#: the band reflectance of each method of `rgb_reflectance` (one film, its film layer)
+_BAND_FUNCTIONS = {
+    "spectral": lambda film, c, observer, terms, shat, arithmetic: spectral_bands(
+        film, c, observer, arithmetic=arithmetic),
+    "fourier": lambda film, c, observer, terms, shat, arithmetic: fourier_bands(
+        film, c, observer, terms=terms, shat=shat, arithmetic=arithmetic),
+}
+#: `rgb_reflectance`'s methods (the registry's rows where "rgb"), by name
+_RGB_METHODS = {"spectral": _bands_rgb("spectral"), "fourier": _bands_rgb("fourier"),
+                "khr": _khr_rgb}
 
 
 def band_centroids(observer=DEFAULT_OBSERVER) -> np.ndarray:

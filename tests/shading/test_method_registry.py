@@ -1,0 +1,135 @@
+"""The executable method registry (`core.methods`): a method is one object and one row.
+
+A toy method registered at test time, a constant-albedo "grey" surface (R_j ≡ g in every
+band), runs through both public entry points, and its values are checked against quantities
+computed without it: under uniform light L_j = g · A(θ_o, α), A the directional albedo of
+`brdf.microfacet.albedo` (K 12, the same quadrature); under a white map at normal view the
+split sum gives g · A(0, α) again (the prefiltered albedo table is exact at its nodes, as
+`ibl`'s docstring measures for `ideal`), and 0 where the point faces away. The row is removed
+afterwards and the method is then refused.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import thinfilm_jax as tf
+from thinfilm_jax.core import methods
+from thinfilm_jax.shading.methods import ShadingMethod
+from thinfilm_jax.shading.prefilter import lookup_albedo, lookup_radiance
+from thinfilm_jax.spectral.spectra import get_observer
+
+GREY = 0.37
+QUAD = (16, 16)
+
+
+class Grey(ShadingMethod):
+    """R_j ≡ GREY: L_j = GREY · A(θ_o, α) under uniform light, GREY · A · P(ω_r, α) under a
+    map (the split sum with a constant Fresnel term)."""
+
+    name = "grey"
+    envmap_kind = "realtime"
+
+    def patch_point(self, film, theta_o, alpha, quad, *, observer, options, lut, table):
+        n = get_observer(observer).n_bands
+        return GREY * jnp.sum(quad.weight) * jnp.ones(n, quad.weight.dtype)
+
+    def map_light(self, film, alpha, normal, view, pref, cfg):
+        cos_o = jnp.sum(normal * view, axis=-1)
+        up = cos_o > 0
+        co = jnp.where(up, cos_o, 1.0)
+        sqa = jnp.sqrt(alpha)
+        rad = lookup_radiance(pref, 2 * co[..., None] * normal - view, sqa)
+        a = lookup_albedo(pref, co, sqa)
+        return jnp.where(up[..., None], GREY * a[..., None] * rad, 0.0)
+
+
+@pytest.fixture
+def grey():
+    methods.register(methods.Method("grey", ("patch", "envmap"), False, "", False,
+                                    "a constant albedo (test)", impl=Grey()))
+    try:
+        yield
+    finally:
+        methods.unregister("grey")
+
+
+def test_grey_method_through_both_entry_points(grey):
+    assert "grey" in methods.names("patch") and "grey" in methods.names("envmap", exact=False)
+    assert "grey" not in methods.names("envmap", exact=True)
+    film = tf.Film(np.array([0.0, 350.0]), 1.33, 1.5)
+    theta = np.array([0.2, 1.1])
+    got = tf.patch_radiance(film, theta, 0.3, method="grey",
+                            options=tf.ModelOptions(quadrature=QUAD))
+    want = GREY * np.asarray(tf.albedo(theta, 0.3, quadrature=QUAD))
+    np.testing.assert_allclose(got, np.broadcast_to(want[:, None], got.shape), rtol=1e-12)
+
+    pref = tf.prefilter_envmap(np.ones((8, 16, 3)), levels=3, resolution=(8, 16),
+                               albedo_shape=(8, 5), sources=0)
+    n = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    env = tf.envmap_radiance(film, 0.25, n, np.array([0.0, 0.0, 1.0]), pref, method="grey")
+    normal_view = GREY * float(tf.albedo(0.0, 0.25, quadrature=(48, 48)))
+    np.testing.assert_allclose(env[0], normal_view, atol=1e-6)
+    assert np.all(np.asarray(env[1]) == 0.0)
+    # what the row says it lacks is refused by the registry, naming the method
+    with pytest.raises(ValueError, match="method='grey' cannot model dispersive"):
+        tf.patch_radiance(tf.Film(300.0, tf.ConstantIndex(1.45), 1.5), 0.2, 0.3, method="grey")
+
+
+def test_unregistered_method_is_refused(grey):
+    methods.unregister("grey")
+    try:
+        assert "grey" not in methods.names("patch")
+        with pytest.raises(ValueError, match="method"):
+            tf.patch_radiance(tf.Film(300.0, 1.33, 1.5), 0.2, 0.3, method="grey")
+    finally:
+        methods.register(methods.Method("grey", ("patch",), False, "", False, "again",
+                                        impl=Grey()))  # the fixture removes it
+
+
+def test_builtin_rows_and_material_path():
+    """Every built-in shading row resolves to its object; the built-ins cannot be removed;
+    `material_path` is the one decision between the one-film, stack and per-band paths."""
+    for name in methods.names("patch") + methods.names("envmap"):
+        assert methods.implementation(name).name == name
+    with pytest.raises(ValueError, match="built in"):
+        methods.unregister("reference")
+    with pytest.raises(ValueError, match="already registered"):
+        methods.register(methods.METHODS["reference"])
+    disp = tf.Film(300.0, tf.ConstantIndex(1.45), 1.5)
+    stack = tf.Stack([100.0, 50.0], (1.46, 2.0), 3.9)
+    assert methods.material_path(tf.Film(300.0, 1.45, 1.5), "khr") == "film"
+    assert [methods.material_path(disp, m) for m in ("reference", "ideal", "filtered")] == \
+        ["stack", "stack", "bands"]
+    assert methods.material_path(stack, "ideal") == "stack"
+    with pytest.raises(ValueError, match="method='filtered' cannot model layer stacks"):
+        methods.material_path(stack, "filtered")
+
+
+def test_material_kinds_by_type():
+    """`patch_radiance` and `envmap_radiance` take every material kind, by type: a classic-lobe
+    `Material` with a film Fresnel term and a GGX lobe is the film's reference (two separate
+    quadratures of one integral), a Lambert `Material` under a white map is its albedo 0.6,
+    and a Lambert `CarPaint` is its coat's Fresnel plus the lobe albedo (closed forms)."""
+    from thinfilm_jax.brdf import carpaint as C
+
+    film = tf.Film(600.0, 1.3, 2.0, 0.5)
+    theta = np.array([0.2, 1.0])
+    mat = tf.Material(tf.ggx_lobe(0.3), tf.film_fresnel(film), tf.no_diffuse())
+    np.testing.assert_allclose(tf.patch_radiance(mat, theta), tf.patch_radiance(film, theta, 0.3),
+                               atol=1e-12)
+    lam = tf.Material(tf.no_specular(), tf.no_fresnel(), tf.lambert_diffuse(0.6))
+    n, v = np.array([0.0, 0.0, 1.0]), np.array([np.sin(0.5), 0.0, np.cos(0.5)])
+    np.testing.assert_allclose(tf.envmap_radiance(lam, None, n, v, np.ones((8, 16, 3))), 0.6,
+                               atol=1e-12)
+    paint = C.car_paint(0.8, [0.0], [0.5], [0.0], C.plain_colour([1.0, 1.0, 1.0]), 1.5)
+    want = C.coat_reflectance(paint, np.cos(0.5)) + C.lobe_albedo(paint, np.cos(0.5))[-1]
+    np.testing.assert_allclose(tf.patch_radiance(paint, 0.5), want, atol=1e-13)
+    with pytest.raises(ValueError, match="alpha must be None"):
+        tf.patch_radiance(mat, 0.2, 0.3)
+    with pytest.raises(ValueError, match="method"):
+        tf.envmap_radiance(lam, None, n, v, np.ones((8, 16, 3)), method="ideal")
+    with pytest.raises(TypeError, match="Film, Stack, Material or CarPaint"):
+        tf.patch_radiance("film", 0.2, 0.3)
+    with pytest.raises(TypeError, match="needs alpha"):
+        tf.envmap_radiance(film, None, n, v, np.ones((8, 16, 3)))

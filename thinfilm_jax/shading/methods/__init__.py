@@ -1,0 +1,151 @@
+r"""The shading methods' common form: one object per method, one module each, named by the
+registry row that holds it (`core.methods`, ``impl``).
+
+`patch_radiance` (`shading.patch`) and `envmap_radiance` (`shading.ibl`) validate, prepare
+and batch; what differs between methods is asked of the method object:
+
+| hook | called by | what it does |
+|---|---|---|
+| ``patch_tables(options, dtype)`` | `patch_radiance` | host-side tables (cached by value), a jit argument |
+| ``patch_point(film, θ_o, α, quad, ...)`` | `patch.patch_one` | one patch of a `Film` → (J,), both layers (``options.layer``) |
+| ``stack_patch_point(stack, θ_o, quad, observer)`` | `patch.stack_patch_one` | one patch of a `Stack` (methods of exact dispersion) |
+| ``envmap_kind`` | `envmap_radiance` | "realtime" (reads a `PrefilteredEnvMap`), "exact" (integrates an `EnvMap`), "table" (a `ColourTable`) |
+| ``envmap_tables(pref, options, dtype)`` | `envmap_radiance` | what travels with the prefiltered map into the jit |
+| ``map_static(options)`` | `envmap_radiance` | the method's static options in the jit's configuration |
+| ``map_points(film, α, n, ω_o, pref, cfg)`` | `ibl._realtime_points` | flat shading points → (P, J), sources included |
+| ``envmap_stack(...)`` | `envmap_radiance` | a `Stack` or dispersive film under a map (methods of exact dispersion) |
+| ``monte_carlo`` | the exact drivers | the sampled rule instead of the quadrature |
+
+Which of the film, stack and per-band paths a material takes is `core.methods.material_path`.
+The split-sum methods (`ideal`, `filtered`) share `SplitSum.map_light`, the read of
+A(θ_o, α) and the prefiltered radiance P_k(ω_r, α) around their band reflectance (SPEC §9):
+
+$$ L_j = A(\theta_o, \alpha) \sum_k R_{jk} P_k(\omega_r, \alpha). $$
+
+Example:
+    >>> from thinfilm_jax.core.methods import implementation
+    >>> implementation("improved").envmap_kind, implementation("mc").monte_carlo
+    ('realtime', True)
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ...spectral.lut import build_shat_lut
+from ...spectral.uplift import cross_band_name
+from ..prefilter import lookup_albedo, lookup_prefiltered
+from ..sources import source_radiance
+
+DEFAULT_SOURCES = 4  # suns split from a map that `improved` prefilters itself
+
+
+class ShadingMethod:
+    """A method of `patch_radiance` / `envmap_radiance` (module table of hooks). The base
+    offers nothing: a subclass defines the hooks of the entry points its row lists."""
+
+    name = ""
+    envmap_kind = ""  # "realtime" | "exact" | "table"; "" where the method has no map path
+    monte_carlo = False
+    default_sources = 0  # suns split when `envmap_radiance` prefilters an EnvMap itself
+
+    def __repr__(self):
+        return f"<shading method {self.name!r}>"
+
+    def patch_tables(self, options, dtype):
+        """Host-side tables of `patch_radiance` (a jit argument), None if none."""
+        return None
+
+    def patch_point(self, film, theta_o, alpha, quad, *, observer, options, lut, table):
+        raise NotImplementedError(f"method {self.name!r} has no uniform-light path")
+
+    def stack_patch_point(self, stack, theta_o, quad, observer):
+        raise NotImplementedError(f"method {self.name!r} has no stack path")
+
+    def envmap_tables(self, pref, options, dtype):
+        """What travels with the `PrefilteredEnvMap` into the jit (the map itself here)."""
+        return pref
+
+    def map_static(self, options):
+        """The method's static options in `envmap_radiance`'s jit configuration."""
+        return False
+
+    def map_points(self, film, alpha, normal, view, pref, cfg):
+        """L_j at flat shading points (the map's method plus the split suns)."""
+        out = self.map_light(film, alpha, normal, view, pref, cfg)
+        return with_sources(out, film, alpha, normal, view, self.prefiltered(pref), cfg)
+
+    def prefiltered(self, pref):
+        """The `PrefilteredEnvMap` inside what `envmap_tables` made."""
+        return pref
+
+    def map_light(self, film, alpha, normal, view, pref, cfg):
+        raise NotImplementedError(f"method {self.name!r} has no prefiltered-map path")
+
+    def envmap_stack(self, material, alpha, normal, view, envmap, observer, kw):
+        raise NotImplementedError(f"method {self.name!r} has no stack path under a map")
+
+
+def shat_lut(pref, cfg, dtype):
+    """The Ŝ table a real-time method reads: the map's cross-band one, the plain bands' one
+    on the diagonal path, None for another Ŝ source."""
+    observer, shat, cross = cfg[1], cfg[3], cfg[4]
+    return pref.lut if cross else (build_shat_lut(observer, dtype=dtype)
+                                   if shat == "lut" else None)
+
+
+def with_sources(out, film, alpha, normal, view, pref, cfg):
+    """`out` plus the suns split from the map (`sources.source_radiance`), if any."""
+    _, observer, terms, shat, cross, arithmetic, _ = cfg
+    if pref.has_sources:
+        lut = shat_lut(pref, cfg, alpha.dtype)
+        out = out + source_radiance(film, alpha, normal, view, pref.sources,
+                                    observer=observer, terms=terms, shat=shat, lut=lut,
+                                    arithmetic=arithmetic, cross_band=cross)
+    return out
+
+
+class SplitSum(ShadingMethod):
+    """A split-sum method under a map: A(θ_o, α) Σ_k R_jk P_k(ω_r, α) (module docstring);
+    a subclass gives R through `bands_per_light` (Σ_k R_jk P_k read per light channel) and
+    `bands` (R_j or R_jk, per moment channel where the map has them)."""
+
+    envmap_kind = "realtime"
+
+    def bands_per_light(self, film, co, view, mom, kw):
+        raise NotImplementedError
+
+    def bands(self, film, co, view, mom, pref, kw):
+        raise NotImplementedError
+
+    def map_light(self, film, alpha, normal, view, pref, cfg):
+        _, observer, terms, shat, cross, arithmetic, _ = cfg
+        cos_o = jnp.sum(normal * view, axis=-1)
+        up = cos_o > 0
+        co = jnp.where(up, cos_o, 1.0)
+        refl = 2 * co[..., None] * normal - view
+        sqa = jnp.sqrt(alpha)
+        rad, mom = lookup_prefiltered(pref, refl, sqa)
+        a = lookup_albedo(pref, co, sqa)
+        obs = cross_band_name(observer) if cross else observer
+        lut = pref.lut if cross else None
+        if shat == "lut" and not cross:  # the diagonal path reads the plain bands' table
+            lut = build_shat_lut(observer, dtype=alpha.dtype)
+        per_light = cross and shat == "lut" and not pref.per_channel
+        if per_light:  # Σ_k R_jk P_k read per light channel (`filtered.filtered_bands`)
+            kw = dict(observer=obs, terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
+                      light=rad)
+            out = self.bands_per_light(film, co, view, mom, kw)
+            return jnp.where(up[..., None], a[..., None] * out, 0.0)
+        r = self.bands(film, co, view, mom, pref, dict(observer=obs, terms=terms, shat=shat,
+                                                        lut=lut, arithmetic=arithmetic))
+        if cross:
+            r = r.reshape(r.shape[:-1] + (3, 3))  # (..., [k,] j, k)
+            if r.ndim > rad.ndim + 1:  # per-channel moments: keep k of the moments = k of R
+                r = jnp.diagonal(r, axis1=-3, axis2=-1)  # (..., j, k)
+            out = jnp.sum(r * rad[..., None, :], axis=-1)
+        else:
+            if r.ndim > rad.ndim:
+                r = jnp.diagonal(r, axis1=-2, axis2=-1)
+            out = r * rad
+        return jnp.where(up[..., None], a[..., None] * out, 0.0)

@@ -52,11 +52,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..core.methods import names as method_names
 from ._output import gltf_line
 
 #: the parser's numeric options are checked by `_checks.check_args` (usage errors); the
 #: indices by `_index_arg` (they may be materials, so they are stored under other names)
-METHODS = ("filtered", "reference", "ideal")
 #: index option → (attribute of the parsed value, lowest value of a number, lowest excluded)
 INDEX_OPTIONS = {"--eta-film": ("eta_film_index", 1.0, False),
                  "--eta-base": ("eta_base_index", 0.0, True),
@@ -149,8 +149,8 @@ def add_parser(sub) -> None:
                    metavar=("LO", "HI"), default=[0.0, 2000.0],
                    help="thickness box, nm (0 2000)")
     p.add_argument("--grid", type=int, default=201, help="thickness grid of the screen (201)")
-    p.add_argument("--method", choices=METHODS, default="filtered",
-                   help="map model: filtered (real time, default), reference, ideal")
+    p.add_argument("--method", choices=method_names("patch"), default="filtered",
+                   help="map model, a patch_radiance method (default filtered: real time; reference: exact)")
     p.add_argument("--observer", choices=["stiles_burch_1959_10", "cie_1931_2"],
                    default="stiles_burch_1959_10")
     p.add_argument("--chunk", type=int, default=2048, help="pixels per batch (2048)")

@@ -213,7 +213,7 @@ def _add_render_parser(sub) -> None:
     """The ``render`` sub-command: one's own scene (`render.scene`) or the study scenes
     (`render.study_scenes`)."""
     from ..shading.envmap import SHIPPED
-    from ..render.study_scenes import METHODS as RENDER_METHODS
+    from ..render.study_scenes import envmap_methods
 
     rd = sub.add_parser("render", help="a film or stack on a sphere, a soap bubble, or the "
                         "study scenes (Kneiphof Figs. 3-6), under an environment map",
@@ -263,7 +263,7 @@ def _add_render_parser(sub) -> None:
     rd.add_argument("--elevation", type=float, help="sphere, bubble: camera elevation above "
                     "the horizon, degrees (sphere 15, bubble 30)")
     rd.add_argument("--method", action="append",
-                    choices=RENDER_METHODS,
+                    choices=envmap_methods(),
                     help="methods, in columns (repeatable; sphere default: reference, "
                          "improved; study scenes: reference, ideal, filtered, improved)")
     rd.add_argument("--bin-reads", dest="bin_reads", type=int, metavar="G",

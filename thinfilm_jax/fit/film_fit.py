@@ -118,7 +118,7 @@ from ..core.material import is_dispersive, needs_stack
 from ..core.methods import METHODS as METHOD_INFO
 from ..core.methods import require
 from ..core.stack import Stack
-from ..shading.patch import METHODS
+from ..core.methods import names as method_names
 from ..spectral.lut import build_shat_lut
 from ..spectral.reflectance import band_centroids
 from ..spectral.spectra import get_observer
@@ -215,7 +215,7 @@ def fit_film(observed, theta_o, *, alpha, initial: Film | Stack,
         free: names of the fitted parameters (`params` module: `Film` fields,
             ``"thickness[i]"`` of a `Stack`, an index model's ``"eta[1].coefficients[0]"``,
             ...) and/or "alpha".
-        method: forward model, a `patch.METHODS` name (SPEC §7).
+        method: forward model, a `core.methods.names("patch")` name (SPEC §7).
         sigma: standard deviations of the observations (broadcast to `observed`).
         options: `FitOptions` (search, solver, quadrature, observer, ...); None = defaults.
 
@@ -234,14 +234,14 @@ def fit_film(observed, theta_o, *, alpha, initial: Film | Stack,
     if not isinstance(initial, Film | Stack):
         raise TypeError(f"initial must be a thinfilm_jax.Film or Stack, got "
                         f"{type(initial).__name__}")
-    V.check_choice("method", method, METHODS)
+    V.check_choice("method", method, method_names("patch"))
     o = _check_options(options, "patch")
     refine_method = None if o.refine_method == method else o.refine_method
     methods = (method,) if refine_method is None else (method, refine_method)
     if needs_stack(initial):
         for m in methods:
             require(m, dispersive=is_dispersive(initial), stack=isinstance(initial, Stack))
-    exact = any(METHOD_INFO[m].exact or m == "ideal" for m in methods)
+    exact = any(METHOD_INFO[m].dispersion == "exact" for m in methods)
     initial = _check_material(initial, get_observer(o.observer).wavelengths if exact
                               else band_centroids(o.observer))
     table = P.scalar_table(initial, with_alpha=True)

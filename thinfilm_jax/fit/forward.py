@@ -73,7 +73,7 @@ def patch_model(film, theta_o, alpha, *, method: str = "reference",
     options = ModelOptions(terms=terms, shat=shat, ndf=ndf, quadrature=tuple(quadrature),
                            arithmetic=arithmetic)
     theta_o = jnp.asarray(theta_o)
-    if needs_stack(film) and (METHOD_INFO[method].exact or method == "ideal"):
+    if needs_stack(film) and (METHOD_INFO[method].dispersion == "exact"):
         stack = traced_stack(film)
 
         def one(t):

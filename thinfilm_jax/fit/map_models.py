@@ -92,7 +92,7 @@ def _material_pixel_model(initial, free, method, observer, options, alpha):
     if "eta_film" in free:
         raise ValueError("free='eta_film' needs a constant film index: this film's index is a "
                          "model (free its parameters with fit_film)")
-    exact = METHOD_INFO[method].exact or method == "ideal"
+    exact = METHOD_INFO[method].dispersion == "exact"
     stack = V.check_material(initial, "initial", wavelengths=(
         get_observer(observer).wavelengths if exact else band_centroids(observer)))
     if batch_shape(stack) != ():

@@ -29,7 +29,7 @@ from ..core import _validate as V
 from ..core.film import Film
 from ..core.stack import Stack
 from ..realtime.filtered import SHAT_SOURCES
-from ..shading.patch import METHODS
+from ..core.methods import names as method_names
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 from . import params as P
 
@@ -230,7 +230,7 @@ class FitOptions:
         put("absolute_sigma", bool(self.absolute_sigma))
         V.check_choice("batching", self.batching, BATCHING)
         if self.refine_method is not None:
-            V.check_choice("refine_method", self.refine_method, METHODS)
+            V.check_choice("refine_method", self.refine_method, method_names("patch"))
         V.check_choice("observer", self.observer, OBSERVERS)
         V.check_choice("shat", self.shat, SHAT_SOURCES)
         V.check_choice("ndf", self.ndf, ("ggx", "beckmann"))

@@ -55,7 +55,7 @@ from ..core import _validate as V
 from ..core.film import Film
 from ..core.material import needs_stack
 from ..realtime.options import ModelOptions
-from ..shading.patch import METHODS
+from ..core.methods import names as method_names
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .map_models import (  # noqa: F401  (the map models, read by tests and studies here)
     ENVMAP_MAP_METHODS,
@@ -179,7 +179,7 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
         alpha: GGX roughness α ∈ (0, 1] (known).
         initial: `Film` with scalar fields: η₂ (initial / fixed), η₃, κ₃, η₁ (known).
         free: ("thickness",) or ("thickness", "eta_film").
-        method: a `patch.METHODS` name for the map model ("filtered": real-time, default).
+        method: a `core.methods.names("patch")` name for the map model ("filtered": real-time, default).
         sigma: noise standard deviation of the image (absolute; weights and errors); None:
             estimated from the image's local differences (`estimate_noise`).
         smoothness_nm: τ of the neighbour prior (None: independent pixels).
@@ -210,7 +210,7 @@ def fit_patch_map(image, theta_o, *, alpha, initial: Film, free=("thickness",),
             radiances, a theta_o that is not a scalar or (H, W), α ∉ (0, 1], unknown `free`
             names, `options` not a `FitOptions` (a `ModelOptions` is `model_options`).
     """
-    V.check_choice("method", method, METHODS)
+    V.check_choice("method", method, method_names("patch"))
     V.check_choice("observer", observer, OBSERVERS)
     free, b = _check_options(free, sigma, smoothness_nm, bounds, grid, eta_grid, steps,
                              sweeps, chunk, options)

@@ -237,11 +237,11 @@ class SceneConfig:
     def __post_init__(self):
         if self.scene not in OWN_SCENES:
             raise ValueError(f"scene must be one of {OWN_SCENES}, got {self.scene!r}")
-        from .study_scenes import METHODS
+        from .study_scenes import envmap_methods
 
-        bad = [m for m in self.methods if m not in METHODS]
+        bad = [m for m in self.methods if m not in envmap_methods()]
         if bad:
-            raise ValueError(f"unknown method(s) {bad}; expected some of {METHODS}")
+            raise ValueError(f"unknown method(s) {bad}; expected some of {envmap_methods()}")
         object.__setattr__(self, "methods", tuple(dict.fromkeys(self.methods)))
         if self.elevation_deg is None:
             object.__setattr__(self, "elevation_deg", 15.0 if self.scene == "sphere" else 30.0)

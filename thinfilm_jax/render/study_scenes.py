@@ -61,8 +61,9 @@ from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
 from ..spectral.spectra import DEFAULT_OBSERVER
 from ..shading.envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..core.film import Film
+from ..core.methods import implementation
 from ..core.methods import names as method_names
-from ..shading.ibl import DEFAULT_SOURCES, REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
+from ..shading.ibl import REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
 from ..shading.ibl_reference import resample_factor
 from ..shading.prefilter import prefilter_envmap
 from ..core.sharding import batch_mesh, map_sharded, to_host
@@ -81,6 +82,13 @@ PAINT_METHODS = ("reference", "colour_table")  # the columns of the car-paint sc
 # every `envmap_radiance` method of the registry (core/methods.py) that shades a film varying
 # per pixel; "colour_table" tabulates one homogeneous material (the car-paint scene's column)
 METHODS = tuple(m for m in method_names("envmap") if m != "colour_table")
+
+
+def envmap_methods() -> tuple[str, ...]:
+    """`METHODS` as the registry holds them now (a method registered at run time included):
+    every `envmap_radiance` method that shades a film varying per pixel."""
+    return tuple(m for m in method_names("envmap")
+                 if implementation(m).envmap_kind in ("realtime", "exact"))
 DEFAULT_METHODS = ("reference", "ideal", "filtered", "improved")
 
 
@@ -97,9 +105,9 @@ class RenderConfig:
     ldr_srgb: bool = False  # 8-/16-bit map files: sRGB-decoded, not refused (load_envmap)
 
     def __post_init__(self):
-        bad = [m for m in self.methods if m not in METHODS]
+        bad = [m for m in self.methods if m not in envmap_methods()]
         if bad:
-            raise ValueError(f"unknown method(s) {bad}; expected some of {METHODS}")
+            raise ValueError(f"unknown method(s) {bad}; expected some of {envmap_methods()}")
         # one column per method: a repeated one would be its own reference (no error)
         object.__setattr__(self, "methods", tuple(dict.fromkeys(self.methods)))
 
@@ -211,15 +219,18 @@ def method_map(cache: dict, name, method: str, observer: str):
     """What `method` reads for the map `name`, built once per map and kept in `cache`: the
     `EnvMap` (reference, mc), the prefiltered map as it is (ideal, filtered), or prefiltered
     with up to `ibl.DEFAULT_SOURCES` suns split off and shaded apart (improved)."""
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
+    films = envmap_methods()
+    if method not in films:
+        raise ValueError(f"unknown method {method!r}; expected one of {films}")
     if name not in cache:
         cache[name] = {"env": load_envmap(name)}
     maps = cache[name]
-    kind = {"reference": "env", "mc": "env", "improved": "sources"}.get(method, "plain")
+    impl = implementation(method)  # the registry's object: what its map path reads
+    kind = ("env" if impl.envmap_kind == "exact" else
+            f"sources={impl.default_sources}" if impl.default_sources else "plain")
     if kind not in maps:
         maps[kind] = prefilter_envmap(maps["env"], observer=observer,
-                                      sources=DEFAULT_SOURCES if kind == "sources" else 0)
+                                      sources=impl.default_sources)
     return maps[kind]
 
 
@@ -265,7 +276,7 @@ def render_one(setup, cfg: RenderConfig, cache: dict, devices=None):
            "times": {}, "values": {}}
     for method in cfg.methods:
         src = method_map(cache, name, method, cfg.observer)
-        exact = method in ("reference", "mc")
+        exact = implementation(method).envmap_kind == "exact"
         if method == "reference":  # α is traced inside the sharded program: resample here
             src = _reference_map(cache, name, env, alpha)
         shade = _shader(cache, devices, method, cfg.observer, film, alpha, src)

@@ -96,3 +96,23 @@ def test_prefiltering_a_traced_map_is_a_clear_error(env):
     with pytest.raises(ValueError, match="prefilter_envmap outside jit"):
         jax.jit(lambda e: envmap_radiance(Film(D0, 1.33, 1.5), ALPHA, n, v, e,
                                           method="filtered"))(env)
+
+
+@pytest.mark.parametrize("method", ["ideal", "filtered"])
+def test_float32_film_under_a_float64_map(method, env):
+    """Mixed precision at the boundary: a float32 film and float32 directions under a map
+    prefiltered in float64 run (the K 29 sum's loop carry takes the film's and the table's
+    common dtype; it raised a carry-type error in `ideal`) and give the float64 film's values
+    to float32 rounding (measured ≤ 3e-8 of values ~0.02–0.5; asserted 1e-6). Under JAX's
+    default ("standard") type promotion, which users have; the suite runs "strict" to catch
+    unintended promotion, and mixing is intended here."""
+    f32 = jnp.float32
+    pref = prefilter_envmap(env, sources=0)
+    n, v = _views()
+    film32 = Film(f32(D0), f32(1.33), f32(1.5))
+    with jax.numpy_dtype_promotion("standard"):
+        got = envmap_radiance(film32, f32(ALPHA), jnp.asarray(n, f32), jnp.asarray(v, f32),
+                              pref, method=method)
+    want = envmap_radiance(Film(D0, 1.33, 1.5), ALPHA, n, v, pref, method=method)
+    assert np.all(np.isfinite(np.asarray(got)))
+    np.testing.assert_allclose(np.asarray(got, np.float64), want, rtol=1e-6, atol=1e-7)

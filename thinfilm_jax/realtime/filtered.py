@@ -126,8 +126,12 @@ def _read_orders(ft, s0, terms, opd, lut, interpolation, channel=None):
     c0 = 0.5 * (ft.c0[0] + ft.c0[1])
     mean, std = opd
     shape = jnp.broadcast_shapes(c0.shape, mean.shape, *(() if std is None else (std.shape,)))
+    # the sum's dtype: the film terms' and the table's (a float32 film under a float64 map
+    # reads float64 values, and the scan's carry must hold them from its first step)
+    dtype = c0.dtype if lut is None else jnp.result_type(c0.dtype,
+                                                          jnp.finfo(lut.table.dtype).dtype)
     out = jnp.broadcast_to(c0[..., None] * jnp.reshape(s0, (1,) * c0.ndim + (-1,)),
-                           shape + s0.shape[-1:])
+                           shape + s0.shape[-1:]).astype(dtype)
 
     def order(carry, m, carrier=None):  # carry: the sum so far and z^(m−1) per polarisation
         out, pr, pi = carry
@@ -139,7 +143,7 @@ def _read_orders(ft, s0, terms, opd, lut, interpolation, channel=None):
                             interpolation=interpolation, channel=channel, carrier=carrier)
         return (out + (wr[..., None] * sr + wi[..., None] * si), pr, pi), None
 
-    one, zero = jnp.ones(shape, c0.dtype), jnp.zeros(shape, c0.dtype)
+    one, zero = jnp.ones(shape, c0.dtype), jnp.zeros(shape, c0.dtype)  # z^0: the film's
     carry = (out, (one, one), (zero, zero))
     if std is not None and (interpolation in UNROLLED_READS or channel is not None):
         first = carrier_parts(lut, mean, channel)

@@ -436,12 +436,19 @@ def test_float32_realtime_close_to_float64(forest_pref):
 
 
 # ----------------------------------------------------------------------------- gradients
+@pytest.fixture(scope="module")
+def sunset8():
+    """venice_sunset downsampled by 8 and its prefiltered map, built once for the module."""
+    env = load_envmap(downsample(load_envmap("venice_sunset"), 8).radiance)
+    return env, prefilter_envmap(env)
+
+
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
 @pytest.mark.parametrize("method", ["reference", "filtered", "improved",
                                     "improved, light_spread"])
-def test_gradients_finite(method, dtype):
-    env = load_envmap(downsample(load_envmap("venice_sunset"), 8).radiance)
-    pref = prefilter_envmap(env) if method != "reference" else env
+def test_gradients_finite(method, dtype, sunset8):
+    env, pref = sunset8
+    pref = pref if method != "reference" else env
     if dtype == jnp.float32:
         pref = pref.astype(jnp.float32)
     v = view_at(np.array([0.0, 0.8, 1.45]), phi=1.0).astype(dtype)

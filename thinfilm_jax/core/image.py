@@ -50,6 +50,16 @@ from typing import NamedTuple
 
 import numpy as np
 
+__all__ = [
+    "ENCODINGS",
+    "RAW_SUFFIXES",
+    "Photo",
+    "srgb_decoding_derivative",
+    "estimate_noise",
+    "read_photo",
+    "read_mask",
+]
+
 ENCODINGS = ("srgb", "linear", "raw")
 RAW_SUFFIXES = frozenset(".3fr .arw .cr2 .cr3 .crw .dcr .dng .erf .iiq .kdc .mef .mos .mrw .nef "
                          ".nrw .orf .pef .raf .rw2 .rwl .sr2 .srf .srw .x3f".split())

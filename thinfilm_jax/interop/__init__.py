@@ -11,3 +11,51 @@ Example (glTF nm and OpenPBR µm describe the same film):
     >>> openpbr.film_to_openpbr(film, factor)["thin_film_thickness"]
     0.4
 """
+
+from .gltf import (
+    EXTENSION,
+    IOR_EXTENSION,
+    EXTRAS,
+    KAPPA_FILM_MAX,
+    mix,
+    iridescence_mix,
+    film_from_gltf,
+    constant_film,
+    constant_index_error,
+    film_to_gltf,
+    alpha_from_gltf,
+    write_thickness_texture,
+    read_thickness_texture,
+    uv_sphere,
+    write_gltf,
+    load_gltf,
+    read_gltf,
+)
+from .index_text import parse_index, parse_layers
+from .openpbr import film_from_openpbr, film_to_openpbr
+
+# Left to their modules (the name differs in meaning between modules, or names a module): DEFAULTS.
+
+__all__ = [
+    "EXTENSION",
+    "IOR_EXTENSION",
+    "EXTRAS",
+    "KAPPA_FILM_MAX",
+    "mix",
+    "iridescence_mix",
+    "film_from_gltf",
+    "constant_film",
+    "constant_index_error",
+    "film_to_gltf",
+    "alpha_from_gltf",
+    "write_thickness_texture",
+    "read_thickness_texture",
+    "uv_sphere",
+    "write_gltf",
+    "load_gltf",
+    "read_gltf",
+    "parse_index",
+    "parse_layers",
+    "film_from_openpbr",
+    "film_to_openpbr",
+]

@@ -71,6 +71,30 @@ from ..brdf.carpaint import PAINTS
 from ..shading.carpaint_ibl import paint_envmap_radiance
 from ..shading.colour_table import colour_table_radiance, prefilter_colour
 
+__all__ = [
+    "PAINT_TABLE",
+    "PAINT_METHODS",
+    "METHODS",
+    "envmap_methods",
+    "DEFAULT_METHODS",
+    "RenderConfig",
+    "camera",
+    "sphere",
+    "thickness_field",
+    "map_label",
+    "scene_setups",
+    "view_azimuth",
+    "shade_block",
+    "method_map",
+    "render_one",
+    "summarise",
+    "summary_table",
+    "PANEL_DPI",
+    "panel_inches",
+    "fit_title",
+    "run_render",
+]
+
 #: the paints' table size: 8 × 16 directions ω_r, 8 views, 4 azimuths (their build evaluates
 #: the paint's brightness and colour at every texel node for each configuration); also the
 #: colour-table study's (``benchmarks/colour_table_study.py``)

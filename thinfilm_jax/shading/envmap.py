@@ -42,6 +42,24 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+__all__ = [
+    "DATA",
+    "SHIPPED",
+    "EnvMap",
+    "load_envmap",
+    "save_envmap",
+    "texel_solid_angles",
+    "direction",
+    "texel_centers",
+    "to_equirect",
+    "lookup_nearest",
+    "lookup_bilinear",
+    "bilinear_taps",
+    "read_taps",
+    "downsample",
+    "luminance_weights",
+]
+
 DATA = Path(__file__).resolve().parents[1] / "data" / "envmaps"
 SHIPPED = {
     "venice_sunset": DATA / "venice_sunset_256.hdr",

@@ -79,6 +79,8 @@ from .methods.filtered import MAP_SHAT_READ  # noqa: F401 (re-exported)
 from .methods.improved import improved_envmap  # noqa: F401 (re-exported)
 from .prefilter import PrefilteredEnvMap, prefilter_envmap
 
+__all__ = ["METHODS", "REALTIME_OPTIONS", "HIGHEST", "envmap_radiance", "KIND_METHODS"]
+
 METHODS = method_names("envmap")  # the built-in methods, the registry's order (core/methods.py)
 REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST

@@ -67,6 +67,15 @@ from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .carpaint_ibl import paint_patch_radiance
 from .material_patch import material_patch_radiance
 
+__all__ = [
+    "METHODS",
+    "KIND_METHODS",
+    "patch_radiance",
+    "stack_patch_one",
+    "patch_one",
+    "patch_radiance_mc",
+]
+
 METHODS = method_names("patch")  # the built-in methods, the registry's order (core/methods.py)
 #: the methods of the material kinds that carry their own lobe (`Material`, `CarPaint`)
 KIND_METHODS = {Material: ("reference",), CarPaint: ("reference",)}

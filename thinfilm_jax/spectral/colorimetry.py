@@ -71,6 +71,21 @@ import numpy as np
 from .spectra import DEFAULT_OBSERVER, get_observer
 from .uplift import basis_on
 
+__all__ = [
+    "CIE_1931",
+    "band_to_xyz_matrix",
+    "bands_to_xyz",
+    "white_xy",
+    "rec709_to_band_matrix",
+    "bands_to_rec709",
+    "rec709_to_bands",
+    "xyz_to_srgb",
+    "bands_to_srgb",
+    "uplift_to_bands",
+    "delta_e2000",
+    "delta_e2000_rec709",
+]
+
 #: The CIE 1931 2° observer: the one glTF's `khr` sensitivity fit approximates.
 CIE_1931 = "cie_1931_2"
 

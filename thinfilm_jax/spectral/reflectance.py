@@ -37,6 +37,20 @@ from ..optics.series import fourier_band_reflectance, series_terms
 from .khr import _khr_jit
 from .spectra import DEFAULT_OBSERVER, SHAT_METHODS, get_observer, sensitivity_ft, shat_at_zero
 
+__all__ = [
+    "METHODS",
+    "LAYERS",
+    "choose_layer",
+    "bare_bands",
+    "rgb_reflectance",
+    "band_centroids",
+    "band_film",
+    "per_band",
+    "stack_bands",
+    "spectral_bands",
+    "fourier_bands",
+]
+
 METHODS = method_names("rgb")  # the registry's order (core/methods.py)
 LAYERS = ("auto", "film", "bare")
 

@@ -91,7 +91,8 @@ from .ndf import (
     walter_alpha,
 )
 
-# Left to their modules (the name differs in meaning between modules, or names a module): NDFS, ashikhmin_shirley, smith_g1.
+# Left to their modules (the name means different things in two modules, or names a
+# module): NDFS, ashikhmin_shirley, smith_g1.
 
 __all__ = [
     "CarPaint",

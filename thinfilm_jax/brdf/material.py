@@ -60,7 +60,7 @@ import numpy as np
 from ..core import _validate as V
 from ..core.film import Film
 from ..optics.fresnel import fresnel_schlick
-from ..spectral.reflectance import METHODS as FILM_METHODS
+from ..spectral.reflectance import RGB_METHODS as FILM_METHODS
 from ..spectral.reflectance import bare_bands, rgb_reflectance
 from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 from . import diffuse as _diffuse

@@ -10,10 +10,12 @@ from .fit import (
     check_output,
     run_fit_cli,
 )
+from .fit_map import IndexArg
 from .fit_photo import PHOTO_SUFFIXES, run_photo
 from .main import OWN_SCENE_OPTIONS, build_parser
 
-# Left to their modules (the name differs in meaning between modules, or names a module): add_arguments, add_parser, main.
+# Left to their modules (the name means different things in two modules, or names a
+# module): add_arguments, add_parser, main.
 
 __all__ = [
     "RAW_SUFFIXES",
@@ -23,6 +25,7 @@ __all__ = [
     "read_observations",
     "check_output",
     "run_fit_cli",
+    "IndexArg",
     "PHOTO_SUFFIXES",
     "run_photo",
     "OWN_SCENE_OPTIONS",

@@ -73,6 +73,7 @@ from .series import (
     series_terms,
     series_reflectance,
     fourier_band_reflectance,
+    FusedTerms,
     fused_terms,
 )
 from .stack import (
@@ -87,7 +88,8 @@ from .stack import (
 )
 from .turns import sincos_turns
 
-# Left to their modules (the name differs in meaning between modules, or names a module): ellipsometry.
+# Left to their modules (the name means different things in two modules, or names a
+# module): ellipsometry.
 
 __all__ = [
     "choose_arithmetic",
@@ -156,6 +158,7 @@ __all__ = [
     "series_terms",
     "series_reflectance",
     "fourier_band_reflectance",
+    "FusedTerms",
     "fused_terms",
     "POLARISATIONS",
     "check_stack",

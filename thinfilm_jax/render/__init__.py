@@ -55,7 +55,7 @@ from .scene_material import (
 from .study_scenes import (
     PAINT_TABLE,
     PAINT_METHODS,
-    METHODS,
+    FILM_MAP_METHODS,
     envmap_methods,
     DEFAULT_METHODS,
     RenderConfig,
@@ -117,7 +117,7 @@ __all__ = [
     "material_from_json",
     "PAINT_TABLE",
     "PAINT_METHODS",
-    "METHODS",
+    "FILM_MAP_METHODS",
     "envmap_methods",
     "DEFAULT_METHODS",
     "RenderConfig",

@@ -4,7 +4,7 @@ their prefiltering for the real-time methods (`prefilter`), suns split from a ma
 `envmap_radiance` (`ibl`, SPEC §9); one module per method (`methods`), looked up in the
 registry (`core.methods`). Imports the layers below."""
 
-from .carpaint_ibl import paint_patch_radiance, paint_envmap_radiance
+from .carpaint_ibl import paint_patch_radiance, paint_envmap_radiance, PAINT_ENVMAP_METHODS
 from .colour_table import (
     ColourTable,
     prefilter_colour,
@@ -14,7 +14,7 @@ from .colour_table import (
     decomposition_error,
     map_fingerprint,
 )
-from .compare import DEFAULT_METHODS, compare_methods
+from .compare import DEFAULT_METHODS, Comparison, compare_methods
 from .envmap import (
     DATA,
     SHIPPED,
@@ -32,7 +32,7 @@ from .envmap import (
     downsample,
     luminance_weights,
 )
-from .ibl import REALTIME_OPTIONS, HIGHEST, envmap_radiance
+from .ibl import ENVMAP_METHODS, REALTIME_OPTIONS, HIGHEST, envmap_radiance, ENVMAP_KIND_METHODS
 from .ibl_adaptive import (
     block_interpolant,
     block_size,
@@ -48,7 +48,7 @@ from .ibl_reference import (
     GrazingLobeWarning,
     exact_stack_envmap,
 )
-from .material_ibl import material_envmap_radiance, effective_alpha
+from .material_ibl import material_envmap_radiance, MATERIAL_ENVMAP_METHODS, effective_alpha
 from .material_patch import (
     material_patch_radiance,
     DEFAULT_SPHERE_QUADRATURE,
@@ -56,7 +56,14 @@ from .material_patch import (
     specular_only,
     diffuse_only,
 )
-from .patch import patch_radiance, stack_patch_one, patch_one, patch_radiance_mc
+from .patch import (
+    PATCH_METHODS,
+    PATCH_KIND_METHODS,
+    patch_radiance,
+    stack_patch_one,
+    patch_one,
+    patch_radiance_mc,
+)
 from .prefilter import (
     MOMENT_RESOLUTION,
     VARIANCE_RESOLUTION,
@@ -72,6 +79,7 @@ from .prefilter import (
     moments_to_mean_cov,
 )
 from .sources import (
+    FilmTable,
     Sources,
     extract_sources,
     with_film_tables,
@@ -80,11 +88,10 @@ from .sources import (
     source_light,
 )
 
-# Left to their modules (the name differs in meaning between modules, or names a module): KIND_METHODS, METHODS.
-
 __all__ = [
     "paint_patch_radiance",
     "paint_envmap_radiance",
+    "PAINT_ENVMAP_METHODS",
     "ColourTable",
     "prefilter_colour",
     "colour_table_radiance",
@@ -93,6 +100,7 @@ __all__ = [
     "decomposition_error",
     "map_fingerprint",
     "DEFAULT_METHODS",
+    "Comparison",
     "compare_methods",
     "DATA",
     "SHIPPED",
@@ -109,9 +117,11 @@ __all__ = [
     "read_taps",
     "downsample",
     "luminance_weights",
+    "ENVMAP_METHODS",
     "REALTIME_OPTIONS",
     "HIGHEST",
     "envmap_radiance",
+    "ENVMAP_KIND_METHODS",
     "block_interpolant",
     "block_size",
     "refine_counts",
@@ -125,12 +135,15 @@ __all__ = [
     "GrazingLobeWarning",
     "exact_stack_envmap",
     "material_envmap_radiance",
+    "MATERIAL_ENVMAP_METHODS",
     "effective_alpha",
     "material_patch_radiance",
     "DEFAULT_SPHERE_QUADRATURE",
     "sphere_rule",
     "specular_only",
     "diffuse_only",
+    "PATCH_METHODS",
+    "PATCH_KIND_METHODS",
     "patch_radiance",
     "stack_patch_one",
     "patch_one",
@@ -147,6 +160,7 @@ __all__ = [
     "lookup_albedo",
     "bin_radiance",
     "moments_to_mean_cov",
+    "FilmTable",
     "Sources",
     "extract_sources",
     "with_film_tables",

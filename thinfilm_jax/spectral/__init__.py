@@ -48,7 +48,7 @@ from .lut import (
     lut_max_error,
 )
 from .reflectance import (
-    METHODS,
+    RGB_METHODS,
     LAYERS,
     choose_layer,
     bare_bands,
@@ -110,7 +110,7 @@ __all__ = [
     "carrier_parts",
     "lookup",
     "lut_max_error",
-    "METHODS",
+    "RGB_METHODS",
     "LAYERS",
     "choose_layer",
     "bare_bands",

@@ -38,7 +38,7 @@ from .khr import _khr_jit
 from .spectra import DEFAULT_OBSERVER, SHAT_METHODS, get_observer, sensitivity_ft, shat_at_zero
 
 __all__ = [
-    "METHODS",
+    "RGB_METHODS",
     "LAYERS",
     "choose_layer",
     "bare_bands",
@@ -51,7 +51,7 @@ __all__ = [
     "fourier_bands",
 ]
 
-METHODS = method_names("rgb")  # the registry's order (core/methods.py)
+RGB_METHODS = method_names("rgb")  # the registry's order (core/methods.py)
 LAYERS = ("auto", "film", "bare")
 
 
@@ -110,7 +110,7 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
         (3,)
     """
     V.check_choice("observer", observer, ("stiles_burch_1959_10", "cie_1931_2"))
-    V.check_choice("method", method, METHODS)
+    V.check_choice("method", method, RGB_METHODS)
     path = material_path(film, method)  # a Stack, or a Film with index models (SPEC §12)
     if path != "film":
         if path == "bands":  # a dispersive single film: indices at each band's centroid

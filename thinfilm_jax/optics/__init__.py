@@ -39,7 +39,7 @@ from .index import (
     sellmeier,
     CompositeIndex,
 )
-from .materials import MATERIALS, MONOLAYER_NM, Material, read_csv, read_yaml, refractive_index
+from .materials import MATERIALS, MONOLAYER_NM, BundledMaterial, read_csv, read_yaml, refractive_index
 from .objective import (
     DEFAULT_NODES,
     MAX_NODES,
@@ -128,7 +128,7 @@ __all__ = [
     "CompositeIndex",
     "MATERIALS",
     "MONOLAYER_NM",
-    "Material",
+    "BundledMaterial",
     "read_csv",
     "read_yaml",
     "refractive_index",

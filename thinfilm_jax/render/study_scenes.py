@@ -61,6 +61,7 @@ from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
 from ..spectral.spectra import DEFAULT_OBSERVER
 from ..shading.envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..core.film import Film
+from ..core.image import srgb_encoding
 from ..core.methods import implementation
 from ..core.methods import names as method_names
 from ..shading.ibl import REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
@@ -337,9 +338,7 @@ def _methods(r, cfg) -> tuple:
 
 
 def _image(r, vals, exposure, observer):
-    import colour
-
-    img = np.clip(colour.cctf_encoding(np.clip(r["background"] * exposure * 0.5, 0, 1)), 0, 1)
+    img = np.clip(srgb_encoding(np.clip(r["background"] * exposure * 0.5, 0, 1)), 0, 1)
     img[r["mask"]] = bands_to_srgb(vals * exposure, observer)
     return img
 

@@ -42,6 +42,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from ..core.image import srgb_decoding
+
 __all__ = [
     "DATA",
     "SHIPPED",
@@ -163,10 +165,8 @@ def _read_image(path: Path, what: str, *, ldr_srgb: bool = False) -> np.ndarray:
     if px.ndim != 3 or px.shape[-1] < 3:
         _fail(what, f"expected an RGB image, got {px.shape[-1] if px.ndim == 3 else 1} channel(s)")
     px = px[..., :3]
-    if integer and ldr_srgb:
-        import colour  # the sRGB EOTF, IEC 61966-2-1 (module docstring)
-
-        px = np.asarray(colour.cctf_decoding(px, function="sRGB"), np.float64)
+    if integer and ldr_srgb:  # the sRGB EOTF, IEC 61966-2-1 (module docstring)
+        px = srgb_decoding(px)
     return px
 
 

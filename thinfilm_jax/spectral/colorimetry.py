@@ -68,6 +68,7 @@ import functools
 
 import numpy as np
 
+from ..core.image import srgb_encoding
 from .spectra import DEFAULT_OBSERVER, get_observer
 from .uplift import basis_on
 
@@ -209,9 +210,7 @@ def bands_to_srgb(values, observer: str = DEFAULT_OBSERVER, exposure: float = 1.
 
 
 def _encode(rgb):
-    import colour
-
-    return np.asarray(colour.cctf_encoding(np.clip(rgb, 0.0, 1.0), function="sRGB"), float)
+    return srgb_encoding(np.clip(rgb, 0.0, 1.0))
 
 
 @functools.cache

@@ -14,20 +14,14 @@ from .fit_map import IndexArg
 from .fit_photo import PHOTO_SUFFIXES, run_photo
 from .main import OWN_SCENE_OPTIONS, build_parser
 
-# Left to their modules (the name means different things in two modules, or names a
-# module): add_arguments, add_parser, main.
+# Left to their modules (main names its module; add_parser and add_arguments differ between modules):
+# add_arguments, add_parser, main.
 
+#: every module's __all__ (names re-exported by two modules are one object)
 __all__ = [
-    "RAW_SUFFIXES",
-    "NOTES",
-    "read_text",
-    "read_csv",
-    "read_observations",
-    "check_output",
-    "run_fit_cli",
-    "IndexArg",
-    "PHOTO_SUFFIXES",
-    "run_photo",
-    "OWN_SCENE_OPTIONS",
-    "build_parser",
+    "RAW_SUFFIXES", "NOTES", "read_text", "read_csv", "read_observations", "check_output",
+    "run_fit_cli",  # fit
+    "IndexArg",  # fit_map
+    "PHOTO_SUFFIXES", "run_photo",  # fit_photo
+    "OWN_SCENE_OPTIONS", "build_parser",  # main
 ]

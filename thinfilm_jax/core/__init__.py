@@ -5,77 +5,37 @@ atomic file writes (`_io`), JAX's persistent compilation cache (`compilation_cac
 batch sharding over devices (`sharding`). Imports nothing else of the package."""
 
 from ._validate import checked
-from .compilation_cache import enable_compilation_cache, cached_host_tables
-from .ellipsometry_data import EllipsometryData, read_ellipsometry
-from .film import Film
-from .image import (
-    ENCODINGS,
-    RAW_SUFFIXES,
-    Photo,
-    srgb_decoding_derivative,
-    estimate_noise,
-    read_photo,
-    read_mask,
+from . import (
+    compilation_cache,
+    ellipsometry_data,
+    film,
+    image,
+    material,
+    methods,
+    sharding,
+    stack,
+    units,
 )
-from .material import (
-    is_dispersive,
-    needs_stack,
-    as_stack,
-    batch_shape,
-    point_split,
-    first_point,
-    expand_batch,
-)
-from .methods import (
-    Method,
-    METHODS,
-    names,
-    implementation,
-    register,
-    unregister,
-    material_path,
-    require,
-)
-from .sharding import batch_mesh, map_sharded, shard_batch, to_host, initialize_distributed
-from .stack import Stack
-from .units import HC_EV_NM, unit_name, to_nanometres
+from .compilation_cache import *  # noqa: F403 (its __all__)
+from .ellipsometry_data import *  # noqa: F403 (its __all__)
+from .film import *  # noqa: F403 (its __all__)
+from .image import *  # noqa: F403 (its __all__)
+from .material import *  # noqa: F403 (its __all__)
+from .methods import *  # noqa: F403 (its __all__)
+from .sharding import *  # noqa: F403 (its __all__)
+from .stack import *  # noqa: F403 (its __all__)
+from .units import *  # noqa: F403 (its __all__)
 
+#: every module's __all__ (names re-exported by two modules are one object)
 __all__ = [
     "checked",
-    "enable_compilation_cache",
-    "cached_host_tables",
-    "EllipsometryData",
-    "read_ellipsometry",
-    "Film",
-    "ENCODINGS",
-    "RAW_SUFFIXES",
-    "Photo",
-    "srgb_decoding_derivative",
-    "estimate_noise",
-    "read_photo",
-    "read_mask",
-    "is_dispersive",
-    "needs_stack",
-    "as_stack",
-    "batch_shape",
-    "point_split",
-    "first_point",
-    "expand_batch",
-    "Method",
-    "METHODS",
-    "names",
-    "implementation",
-    "register",
-    "unregister",
-    "material_path",
-    "require",
-    "batch_mesh",
-    "map_sharded",
-    "shard_batch",
-    "to_host",
-    "initialize_distributed",
-    "Stack",
-    "HC_EV_NM",
-    "unit_name",
-    "to_nanometres",
+    *compilation_cache.__all__,
+    *ellipsometry_data.__all__,
+    *film.__all__,
+    *image.__all__,
+    *material.__all__,
+    *methods.__all__,
+    *sharding.__all__,
+    *stack.__all__,
+    *units.__all__,
 ]

@@ -3,183 +3,66 @@ and bounds in `options`) and thickness maps from images (`thickness_map`), on on
 engine (`engine`: box transform, Levenberg–Marquardt, covariance; optimistix's other
 solvers by name). Imports the layers below."""
 
-from .ellipsometry_fit import ellipsometry_model, fit_ellipsometry
-from .engine import (
-    Covariance,
-    Solve,
-    covariance,
-    from_box,
-    implicit_solution,
-    levenberg_marquardt,
-    lm_solve,
-    to_box,
+from . import (
+    ellipsometry_fit,
+    engine,
+    film_fit,
+    forward,
+    map_models,
+    map_quality,
+    multistart,
+    options,
+    params,
+    photo,
+    photo_flags,
+    photo_light,
+    photo_model,
+    photo_screen,
+    pixelwise,
+    raw_spectrum,
+    results,
+    spectrum_file,
+    thickness_map,
 )
-from .film_fit import DEFAULT_BOUNDS, FILM_PARAMS, PARAMS, SOLVERS, fit_film, fit_spectrum
-from .forward import band_patch, patch_model, spectrum_model
-from .map_models import ENVMAP_MAP_METHODS, MAP_OPTIONS, render_patch_map
-from .map_quality import (
-    ORDER_JUMP_NM,
-    ORDER_SEPARATION_NM,
-    estimate_noise,
-    neighbours,
-    order_flags,
-)
-from .multistart import solve_multistart, order_moves, grid_starts
-from .options import (
-    AMBIGUOUS_DCHI2,
-    MAP_BOUNDS,
-    MISFIT_QUANTILE,
-    FitOptions,
-    FitResult,
-    MisfitWarning,
-    misfit_warnings,
-    reduced_chi2,
-)
-from .params import ParamMap, default_box, resolve, scalar_names, scalar_table, value_of
-from .photo import fit_photo
-from .photo_flags import MARGIN_SIGMAS, reasons, ambiguous, fit_notes
-from .photo_light import (
-    ILLUMINATIONS,
-    DEGREE,
-    N_FIELD,
-    MIN_IDENTIFIABLE,
-    basis,
-    fit_field,
-    identifiability,
-    fit_light,
-)
-from .photo_model import photo_colours, render_photo
-from .photo_screen import (
-    DISTINCT_NM,
-    screen,
-    features,
-    residual,
-    bucket,
-    chunks,
-    pad_to,
-    screen_all,
-    closed_gains,
-    search_gains,
-    reference_gains,
-    matrix_from_pixels,
-)
-from .pixelwise import (
-    alternative,
-    choose,
-    fit_map,
-    grow,
-    icm,
-    misfit,
-    progress,
-    refine_pixel,
-    screen_grid,
-)
-from .raw_spectrum import (
-    Envelope,
-    SIGMA_FLOOR,
-    SIGMA_WINDOW,
-    envelope_basis,
-    estimate_sigma,
-    project,
-    raw_starts,
-)
-from .results import MapResult, PhotoResult, chi2_text
-from .spectrum_file import MIN_POINTS, read_spectrum
-from .thickness_map import fit_envmap_map, fit_patch_map
+from .ellipsometry_fit import *  # noqa: F403 (its __all__)
+from .engine import *  # noqa: F403 (its __all__)
+from .film_fit import *  # noqa: F403 (its __all__)
+from .forward import *  # noqa: F403 (its __all__)
+from .map_models import *  # noqa: F403 (its __all__)
+from .map_quality import *  # noqa: F403 (its __all__)
+from .multistart import *  # noqa: F403 (its __all__)
+from .options import *  # noqa: F403 (its __all__)
+from .params import *  # noqa: F403 (its __all__)
+from .photo import *  # noqa: F403 (its __all__)
+from .photo_flags import *  # noqa: F403 (its __all__)
+from .photo_light import *  # noqa: F403 (its __all__)
+from .photo_model import *  # noqa: F403 (its __all__)
+from .photo_screen import *  # noqa: F403 (its __all__)
+from .pixelwise import *  # noqa: F403 (its __all__)
+from .raw_spectrum import *  # noqa: F403 (its __all__)
+from .results import *  # noqa: F403 (its __all__)
+from .spectrum_file import *  # noqa: F403 (its __all__)
+from .thickness_map import *  # noqa: F403 (its __all__)
 
+#: every module's __all__ (names re-exported by two modules are one object)
 __all__ = [
-    "ellipsometry_model",
-    "fit_ellipsometry",
-    "Covariance",
-    "Solve",
-    "covariance",
-    "from_box",
-    "implicit_solution",
-    "levenberg_marquardt",
-    "lm_solve",
-    "to_box",
-    "DEFAULT_BOUNDS",
-    "FILM_PARAMS",
-    "PARAMS",
-    "SOLVERS",
-    "fit_film",
-    "fit_spectrum",
-    "band_patch",
-    "patch_model",
-    "spectrum_model",
-    "ENVMAP_MAP_METHODS",
-    "MAP_OPTIONS",
-    "render_patch_map",
-    "ORDER_JUMP_NM",
-    "ORDER_SEPARATION_NM",
-    "estimate_noise",
-    "neighbours",
-    "order_flags",
-    "solve_multistart",
-    "order_moves",
-    "grid_starts",
-    "AMBIGUOUS_DCHI2",
-    "MAP_BOUNDS",
-    "MISFIT_QUANTILE",
-    "FitOptions",
-    "FitResult",
-    "MisfitWarning",
-    "misfit_warnings",
-    "reduced_chi2",
-    "ParamMap",
-    "default_box",
-    "resolve",
-    "scalar_names",
-    "scalar_table",
-    "value_of",
-    "fit_photo",
-    "MARGIN_SIGMAS",
-    "reasons",
-    "ambiguous",
-    "fit_notes",
-    "ILLUMINATIONS",
-    "DEGREE",
-    "N_FIELD",
-    "MIN_IDENTIFIABLE",
-    "basis",
-    "fit_field",
-    "identifiability",
-    "fit_light",
-    "photo_colours",
-    "render_photo",
-    "DISTINCT_NM",
-    "screen",
-    "features",
-    "residual",
-    "bucket",
-    "chunks",
-    "pad_to",
-    "screen_all",
-    "closed_gains",
-    "search_gains",
-    "reference_gains",
-    "matrix_from_pixels",
-    "alternative",
-    "choose",
-    "fit_map",
-    "grow",
-    "icm",
-    "misfit",
-    "progress",
-    "refine_pixel",
-    "screen_grid",
-    "Envelope",
-    "SIGMA_FLOOR",
-    "SIGMA_WINDOW",
-    "envelope_basis",
-    "estimate_sigma",
-    "project",
-    "raw_starts",
-    "MapResult",
-    "PhotoResult",
-    "chi2_text",
-    "MIN_POINTS",
-    "read_spectrum",
-    "fit_envmap_map",
-    "fit_patch_map",
+    *ellipsometry_fit.__all__,
+    *engine.__all__,
+    *film_fit.__all__,
+    *forward.__all__,
+    *map_models.__all__,
+    *map_quality.__all__,
+    *multistart.__all__,
+    *options.__all__,
+    *params.__all__,
+    *photo.__all__,
+    *photo_flags.__all__,
+    *photo_light.__all__,
+    *photo_model.__all__,
+    *photo_screen.__all__,
+    *pixelwise.__all__,
+    *raw_spectrum.__all__,
+    *results.__all__,
+    *spectrum_file.__all__,
+    *thickness_map.__all__,
 ]

@@ -4,169 +4,52 @@ exact Airy reflectance of one film (`airy`), N-layer stacks' reflectance and tra
 Belcour & Barla 2017's series terms (`series`) and the optical path difference and its
 distribution (`opd`). Imports `core`."""
 
-from .airy import choose_arithmetic, polarised_reflectance, airy_reflectance, BLOCK, broadcast_all
-from .effective_medium import EMA_METHODS, EffectiveMedium
+from . import (
+    airy,
+    effective_medium,
+    fresnel,
+    index,
+    materials,
+    objective,
+    opd,
+    oscillators,
+    series,
+    stack,
+    turns,
+)
+from .airy import *  # noqa: F403 (its __all__)
+from .effective_medium import *  # noqa: F403 (its __all__)
+from .fresnel import *  # noqa: F403 (its __all__)
+from .index import *  # noqa: F403 (its __all__)
+from .materials import *  # noqa: F403 (its __all__)
+from .objective import *  # noqa: F403 (its __all__)
+from .opd import *  # noqa: F403 (its __all__)
+from .oscillators import *  # noqa: F403 (its __all__)
+from .series import *  # noqa: F403 (its __all__)
+from .stack import *  # noqa: F403 (its __all__)
+from .turns import *  # noqa: F403 (its __all__)
 from .ellipsometry import (
     check_lossless_ambient,
     ellipsometric_ratio,
     fold_delta,
     psi_delta_traced,
 )
-from .fresnel import (
-    safe_sqrt,
-    sqrt_upper_parts,
-    sqrt_upper,
-    complex_dtype,
-    as_complex,
-    safe_div,
-    sin2_outer,
-    interface_amplitudes,
-    Interfaces,
-    film_interfaces,
-    normal_reflectance,
-    fresnel_schlick,
-)
-from .index import (
-    IndexModel,
-    is_index_model,
-    index_at,
-    check_wavelengths,
-    ConstantIndex,
-    check_table,
-    TabulatedIndex,
-    FormulaIndex,
-    cauchy,
-    sellmeier,
-    CompositeIndex,
-)
-from .materials import MATERIALS, MONOLAYER_NM, BundledMaterial, read_csv, read_yaml, refractive_index
-from .objective import (
-    DEFAULT_NODES,
-    MAX_NODES,
-    auto_nodes,
-    branch_rho,
-    cone_nodes,
-    objective_reflectance,
-    objective_reflectance_traced,
-    phase_change,
-)
-from .opd import (
-    OPDMoments,
-    cos_incidence_from_projection,
-    opd_of_cos,
-    taylor_opd_moments,
-    project_light_moments,
-    opd_moments_exact,
-)
-from .oscillators import (
-    DielectricIndex,
-    Gaussian,
-    Lorentz,
-    TaucLorentz,
-    dawson,
-    gaussian,
-    lorentz,
-    tauc_lorentz,
-)
-from .series import (
-    SeriesTerms,
-    series_terms,
-    series_reflectance,
-    fourier_band_reflectance,
-    FusedTerms,
-    fused_terms,
-)
-from .stack import (
-    POLARISATIONS,
-    check_stack,
-    check_index,
-    stack_reflectance,
-    stack_transmittance,
-    stack_reflectance_traced,
-    stack_amplitudes,
-    stack_amplitudes_traced,
-)
-from .turns import sincos_turns
 
-# Left to their modules (the name means different things in two modules, or names a
-# module): ellipsometry.
+# Left to their modules (the function ellipsometry names its module):
+# ellipsometry.
 
+#: every module's __all__ (names re-exported by two modules are one object)
 __all__ = [
-    "choose_arithmetic",
-    "polarised_reflectance",
-    "airy_reflectance",
-    "BLOCK",
-    "broadcast_all",
-    "EMA_METHODS",
-    "EffectiveMedium",
-    "check_lossless_ambient",
-    "ellipsometric_ratio",
-    "fold_delta",
-    "psi_delta_traced",
-    "safe_sqrt",
-    "sqrt_upper_parts",
-    "sqrt_upper",
-    "complex_dtype",
-    "as_complex",
-    "safe_div",
-    "sin2_outer",
-    "interface_amplitudes",
-    "Interfaces",
-    "film_interfaces",
-    "normal_reflectance",
-    "fresnel_schlick",
-    "IndexModel",
-    "is_index_model",
-    "index_at",
-    "check_wavelengths",
-    "ConstantIndex",
-    "check_table",
-    "TabulatedIndex",
-    "FormulaIndex",
-    "cauchy",
-    "sellmeier",
-    "CompositeIndex",
-    "MATERIALS",
-    "MONOLAYER_NM",
-    "BundledMaterial",
-    "read_csv",
-    "read_yaml",
-    "refractive_index",
-    "DEFAULT_NODES",
-    "MAX_NODES",
-    "auto_nodes",
-    "branch_rho",
-    "cone_nodes",
-    "objective_reflectance",
-    "objective_reflectance_traced",
-    "phase_change",
-    "OPDMoments",
-    "cos_incidence_from_projection",
-    "opd_of_cos",
-    "taylor_opd_moments",
-    "project_light_moments",
-    "opd_moments_exact",
-    "DielectricIndex",
-    "Gaussian",
-    "Lorentz",
-    "TaucLorentz",
-    "dawson",
-    "gaussian",
-    "lorentz",
-    "tauc_lorentz",
-    "SeriesTerms",
-    "series_terms",
-    "series_reflectance",
-    "fourier_band_reflectance",
-    "FusedTerms",
-    "fused_terms",
-    "POLARISATIONS",
-    "check_stack",
-    "check_index",
-    "stack_reflectance",
-    "stack_transmittance",
-    "stack_reflectance_traced",
-    "stack_amplitudes",
-    "stack_amplitudes_traced",
-    "sincos_turns",
+    *airy.__all__,
+    *effective_medium.__all__,
+    "check_lossless_ambient", "ellipsometric_ratio", "fold_delta", "psi_delta_traced",  # ellipsometry
+    *fresnel.__all__,
+    *index.__all__,
+    *materials.__all__,
+    *objective.__all__,
+    *opd.__all__,
+    *oscillators.__all__,
+    *series.__all__,
+    *stack.__all__,
+    *turns.__all__,
 ]

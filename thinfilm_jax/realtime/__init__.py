@@ -2,45 +2,18 @@
 (`filtered`, K 20–29), this library's improved model (`improved`), the fused per-point
 kernels (`kernels`) and the knobs they share (`options`). Imports the layers below."""
 
-from .filtered import SHAT_SOURCES, filtered_bands, split_by_light
-from .improved import (
-    BinLight,
-    ImprovedOptions,
-    lookup_bins,
-    lookup_lobe,
-    lookup_reads,
-    bin_bands,
-    scan_bins,
-    improved_bins,
-    improved_bands,
-    improved_kernel,
-)
-from .improved_table import BinTable, bin_table, prefilter_kernel, DEFAULT_BINS
-from .kernels import ideal_kernel, filtered_kernel, lobe_moments
-from .options import PRESETS, ModelOptions, check_options
+from . import filtered, improved, improved_table, kernels, options
+from .filtered import *  # noqa: F403 (its __all__)
+from .improved import *  # noqa: F403 (its __all__)
+from .improved_table import *  # noqa: F403 (its __all__)
+from .kernels import *  # noqa: F403 (its __all__)
+from .options import *  # noqa: F403 (its __all__)
 
+#: every module's __all__ (names re-exported by two modules are one object)
 __all__ = [
-    "SHAT_SOURCES",
-    "filtered_bands",
-    "split_by_light",
-    "BinLight",
-    "ImprovedOptions",
-    "lookup_bins",
-    "lookup_lobe",
-    "lookup_reads",
-    "bin_bands",
-    "scan_bins",
-    "improved_bins",
-    "improved_bands",
-    "improved_kernel",
-    "BinTable",
-    "bin_table",
-    "prefilter_kernel",
-    "DEFAULT_BINS",
-    "ideal_kernel",
-    "filtered_kernel",
-    "lobe_moments",
-    "PRESETS",
-    "ModelOptions",
-    "check_options",
+    *filtered.__all__,
+    *improved.__all__,
+    *improved_table.__all__,
+    *kernels.__all__,
+    *options.__all__,
 ]

@@ -4,167 +4,48 @@ their prefiltering for the real-time methods (`prefilter`), suns split from a ma
 `envmap_radiance` (`ibl`, SPEC §9); one module per method (`methods`), looked up in the
 registry (`core.methods`). Imports the layers below."""
 
-from .carpaint_ibl import paint_patch_radiance, paint_envmap_radiance, PAINT_ENVMAP_METHODS
-from .colour_table import (
-    ColourTable,
-    prefilter_colour,
-    colour_table_radiance,
-    check_colour_table,
-    exact_colour_radiance,
-    decomposition_error,
-    map_fingerprint,
+from . import (
+    carpaint_ibl,
+    colour_table,
+    compare,
+    envmap,
+    ibl,
+    ibl_adaptive,
+    ibl_integrand,
+    ibl_reference,
+    material_ibl,
+    material_patch,
+    patch,
+    prefilter,
+    sources,
 )
-from .compare import DEFAULT_METHODS, Comparison, compare_methods
-from .envmap import (
-    DATA,
-    SHIPPED,
-    EnvMap,
-    load_envmap,
-    save_envmap,
-    texel_solid_angles,
-    direction,
-    texel_centers,
-    to_equirect,
-    lookup_nearest,
-    lookup_bilinear,
-    bilinear_taps,
-    read_taps,
-    downsample,
-    luminance_weights,
-)
-from .ibl import ENVMAP_METHODS, REALTIME_OPTIONS, HIGHEST, envmap_radiance, ENVMAP_KIND_METHODS
-from .ibl_adaptive import (
-    block_interpolant,
-    block_size,
-    refine_counts,
-    level3_blocks,
-    adaptive_radiance,
-)
-from .ibl_integrand import sub_nodes, texel_nodes
-from .ibl_reference import (
-    auto_subdivisions,
-    resample_factor,
-    exact_radiance,
-    GrazingLobeWarning,
-    exact_stack_envmap,
-)
-from .material_ibl import material_envmap_radiance, MATERIAL_ENVMAP_METHODS, effective_alpha
-from .material_patch import (
-    material_patch_radiance,
-    DEFAULT_SPHERE_QUADRATURE,
-    sphere_rule,
-    specular_only,
-    diffuse_only,
-)
-from .patch import (
-    PATCH_METHODS,
-    PATCH_KIND_METHODS,
-    patch_radiance,
-    stack_patch_one,
-    patch_one,
-    patch_radiance_mc,
-)
-from .prefilter import (
-    MOMENT_RESOLUTION,
-    VARIANCE_RESOLUTION,
-    PrefilteredEnvMap,
-    level_source,
-    filter_level,
-    prefilter_envmap,
-    albedo_table,
-    lookup_prefiltered,
-    lookup_radiance,
-    lookup_albedo,
-    bin_radiance,
-    moments_to_mean_cov,
-)
-from .sources import (
-    FilmTable,
-    Sources,
-    extract_sources,
-    with_film_tables,
-    cap_nodes,
-    source_radiance,
-    source_light,
-)
+from .carpaint_ibl import *  # noqa: F403 (its __all__)
+from .colour_table import *  # noqa: F403 (its __all__)
+from .compare import *  # noqa: F403 (its __all__)
+from .envmap import *  # noqa: F403 (its __all__)
+from .ibl import *  # noqa: F403 (its __all__)
+from .ibl_adaptive import *  # noqa: F403 (its __all__)
+from .ibl_integrand import *  # noqa: F403 (its __all__)
+from .ibl_reference import *  # noqa: F403 (its __all__)
+from .material_ibl import *  # noqa: F403 (its __all__)
+from .material_patch import *  # noqa: F403 (its __all__)
+from .patch import *  # noqa: F403 (its __all__)
+from .prefilter import *  # noqa: F403 (its __all__)
+from .sources import *  # noqa: F403 (its __all__)
 
+#: every module's __all__ (names re-exported by two modules are one object)
 __all__ = [
-    "paint_patch_radiance",
-    "paint_envmap_radiance",
-    "PAINT_ENVMAP_METHODS",
-    "ColourTable",
-    "prefilter_colour",
-    "colour_table_radiance",
-    "check_colour_table",
-    "exact_colour_radiance",
-    "decomposition_error",
-    "map_fingerprint",
-    "DEFAULT_METHODS",
-    "Comparison",
-    "compare_methods",
-    "DATA",
-    "SHIPPED",
-    "EnvMap",
-    "load_envmap",
-    "save_envmap",
-    "texel_solid_angles",
-    "direction",
-    "texel_centers",
-    "to_equirect",
-    "lookup_nearest",
-    "lookup_bilinear",
-    "bilinear_taps",
-    "read_taps",
-    "downsample",
-    "luminance_weights",
-    "ENVMAP_METHODS",
-    "REALTIME_OPTIONS",
-    "HIGHEST",
-    "envmap_radiance",
-    "ENVMAP_KIND_METHODS",
-    "block_interpolant",
-    "block_size",
-    "refine_counts",
-    "level3_blocks",
-    "adaptive_radiance",
-    "sub_nodes",
-    "texel_nodes",
-    "auto_subdivisions",
-    "resample_factor",
-    "exact_radiance",
-    "GrazingLobeWarning",
-    "exact_stack_envmap",
-    "material_envmap_radiance",
-    "MATERIAL_ENVMAP_METHODS",
-    "effective_alpha",
-    "material_patch_radiance",
-    "DEFAULT_SPHERE_QUADRATURE",
-    "sphere_rule",
-    "specular_only",
-    "diffuse_only",
-    "PATCH_METHODS",
-    "PATCH_KIND_METHODS",
-    "patch_radiance",
-    "stack_patch_one",
-    "patch_one",
-    "patch_radiance_mc",
-    "MOMENT_RESOLUTION",
-    "VARIANCE_RESOLUTION",
-    "PrefilteredEnvMap",
-    "level_source",
-    "filter_level",
-    "prefilter_envmap",
-    "albedo_table",
-    "lookup_prefiltered",
-    "lookup_radiance",
-    "lookup_albedo",
-    "bin_radiance",
-    "moments_to_mean_cov",
-    "FilmTable",
-    "Sources",
-    "extract_sources",
-    "with_film_tables",
-    "cap_nodes",
-    "source_radiance",
-    "source_light",
+    *carpaint_ibl.__all__,
+    *colour_table.__all__,
+    *compare.__all__,
+    *envmap.__all__,
+    *ibl.__all__,
+    *ibl_adaptive.__all__,
+    *ibl_integrand.__all__,
+    *ibl_reference.__all__,
+    *material_ibl.__all__,
+    *material_patch.__all__,
+    *patch.__all__,
+    *prefilter.__all__,
+    *sources.__all__,
 ]

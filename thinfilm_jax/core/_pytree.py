@@ -20,8 +20,11 @@ def pytree_dataclass(cls, data_fields, meta_fields):
         ...     kind: str
         ...     alpha: object = 0.5
         >>> Lobe = pytree_dataclass(Lobe, ["alpha"], ["kind"])
-        >>> jax.tree_util.tree_leaves(Lobe("ggx", jnp.float32(0.3)))
-        [Array(0.3, dtype=float32)]
+        >>> leaves, tree = jax.tree_util.tree_flatten(Lobe("ggx", jnp.float32(0.3)))
+        >>> len(leaves), leaves[0].dtype.name  # the kind is static: part of `tree`
+        (1, 'float32')
+        >>> tree == jax.tree_util.tree_structure(Lobe("beckmann", jnp.float32(0.3)))
+        False
     """
     cls = dataclasses.dataclass(frozen=True)(cls)
     return jax.tree_util.register_dataclass(cls, data_fields=data_fields, meta_fields=meta_fields)

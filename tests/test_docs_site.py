@@ -8,8 +8,9 @@
   have none of them (`LINK_PROBLEMS`), and every relative href/src of the built HTML must name
   a file of the site (`broken_links`).
 * Every public name of `thinfilm_jax` (the names `thinfilm_jax/__init__.py` imports) is a
-  `:::` target of docs/api/*.md, directly or as a member of a documented module, and has its
-  anchor in the built API pages.
+  `:::` target of docs/api/*.md, directly or as a member of a documented module (a subpackage
+  documents the names of its ``__all__``), and has its anchor in the built API pages; every
+  name of a documented subpackage's ``__all__`` has its anchor too.
 * (docs/reference/layout.md, the package layout page, is checked by tests/test_layout.py.)
 * Every page under docs/ is in the nav (except the draft and the hook that mkdocs.yml
   excludes).
@@ -70,8 +71,11 @@ def exports() -> dict[str, str]:
 
 
 def candidate_paths(name: str, imported_from: str) -> set[str]:
-    """Where `name` may be documented: the path it is imported from, and the path of the
-    object's definition (a class or function re-exported by another module)."""
+    """Where `name` may be documented: the path it is imported from, the path of the
+    object's definition (a class or function re-exported by another module), and the path
+    under its subpackage (``thinfilm_jax.core.Film``) where that subpackage's ``__all__``
+    exports the same object."""
+    import importlib
     import types
 
     import thinfilm_jax
@@ -82,7 +86,29 @@ def candidate_paths(name: str, imported_from: str) -> set[str]:
         paths.add(obj.__name__)
     elif isinstance(getattr(obj, "__module__", None), str) and hasattr(obj, "__qualname__"):
         paths.add(f"{obj.__module__}.{obj.__qualname__}")
+    for path in list(paths):
+        parts = path.split(".")
+        if len(parts) > 3 and parts[0] == "thinfilm_jax":
+            sub = importlib.import_module(".".join(parts[:2]))
+            leaf = parts[-1]
+            if leaf in getattr(sub, "__all__", ()) and getattr(sub, leaf) is obj:
+                paths.add(f"{sub.__name__}.{leaf}")
     return paths
+
+
+def subpackage_exports(targets) -> dict[str, list[str]]:
+    """{subpackage: its ``__all__``} for every subpackage that is a `:::` target documenting
+    all its public members."""
+    import importlib
+    import types
+
+    out = {}
+    for _, target, members in targets:
+        if members is None and re.fullmatch(r"thinfilm_jax\.\w+", target):
+            mod = importlib.import_module(target)
+            if isinstance(mod, types.ModuleType) and hasattr(mod, "__path__"):
+                out[target] = list(mod.__all__)
+    return out
 
 
 def api_targets(texts: dict[str, str]) -> list[tuple[str, str, object]]:
@@ -205,6 +231,11 @@ def test_the_coverage_check_fails_when_a_name_is_missing():
     assert not uncovered(names, api_targets({"a.md": "::: thinfilm_jax.core.film.Film\n"}))
     assert not uncovered(names, api_targets({"a.md": (
         "::: thinfilm_jax.core.film\n    options:\n      members: [Film]\n")}))
+    # the subpackage documents the names of its __all__ (Film is one of core's)
+    via_core = {"Film": candidate_paths("Film", "thinfilm_jax.core.film.Film")}
+    assert "thinfilm_jax.core.Film" in via_core["Film"]
+    assert not uncovered(via_core, api_targets({"a.md": "::: thinfilm_jax.core\n"}))
+    assert uncovered(via_core, api_targets({"a.md": "::: thinfilm_jax.optics\n"}))
 
 
 # The studies pages carry the README's measured tables and sentences (copied, with their
@@ -269,6 +300,11 @@ def test_site_builds_strict_and_documents_every_public_name(tmp_path):
     missing = [f"{n} ({' or '.join(sorted(ps))})" for n, ps in sorted(public_names().items())
                if not ps & anchors]
     assert not missing, "no anchor in the built API pages for: " + ", ".join(missing)
+    exported = subpackage_exports(api_targets(api_texts()))
+    assert len(exported) >= 8  # one page per layer, core to interop
+    missing = [f"{sub}.{n}" for sub, names in exported.items() for n in names
+               if f"{sub}.{n}" not in anchors]
+    assert not missing, "names of a subpackage's __all__ without an anchor: " + ", ".join(missing)
     # the figures of the studies pages are served from figures/ (docs/_hooks/figures.py)
     assert (site / "figures" / "figure7.png").is_file()
     assert "figures/figure7.png" in (site / "studies" / "figure7" / "index.html").read_text("utf-8")

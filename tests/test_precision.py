@@ -13,7 +13,7 @@ from _precision import assert_contractions_precise, count_contractions, imprecis
 
 import thinfilm_jax as tf
 from thinfilm_jax.spectral import lut as lut_mod
-from thinfilm_jax.shading.patch import METHODS as PATCH_METHODS
+from thinfilm_jax.shading.patch import PATCH_METHODS
 
 F32 = jnp.float32
 FILM32 = tf.Film(600.0, 1.3, 2.0, 0.5).astype(F32)

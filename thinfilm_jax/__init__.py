@@ -66,7 +66,7 @@ from .spectral.camera import camera_response as camera_response
 from .core.image import read_photo as read_photo
 from .interop.gltf import film_from_gltf as film_from_gltf
 from .interop.gltf import film_to_gltf as film_to_gltf
-from .shading.ibl import METHODS as ENVMAP_METHODS
+from .shading.ibl import ENVMAP_METHODS as ENVMAP_METHODS
 from .shading.ibl import envmap_radiance as envmap_radiance
 from .spectral.lut import ShatLUT as ShatLUT
 from .spectral.lut import build_shat_lut as build_shat_lut
@@ -84,7 +84,7 @@ from .brdf.material import (  # the classic lobes beside the film (brdf/material
 from .optics.opd import OPDMoments as OPDMoments
 from .realtime.options import ModelOptions as ModelOptions
 from .optics.opd import taylor_opd_moments as taylor_opd_moments
-from .shading.patch import METHODS as PATCH_METHODS
+from .shading.patch import PATCH_METHODS as PATCH_METHODS
 from .shading.patch import patch_radiance as patch_radiance
 from .shading.patch import patch_radiance_mc as patch_radiance_mc
 from .shading.material_patch import material_patch_radiance as material_patch_radiance

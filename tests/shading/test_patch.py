@@ -10,7 +10,7 @@ from thinfilm_jax import Film, ModelOptions
 from thinfilm_jax.spectral.colorimetry import bands_to_xyz, delta_e2000
 from thinfilm_jax.brdf.microfacet import albedo, light_moments, patch_quadrature
 from thinfilm_jax.optics.opd import (opd_moments_exact, project_light_moments, taylor_opd_moments)
-from thinfilm_jax.shading.patch import METHODS, patch_one, patch_radiance, patch_radiance_mc
+from thinfilm_jax.shading.patch import PATCH_METHODS, patch_one, patch_radiance, patch_radiance_mc
 
 FIG7 = Film(600.0, 1.3, 2.0, 0.5)
 # A grid that includes grazing views and near-mirror / very rough surfaces.
@@ -141,7 +141,7 @@ def test_taylor_chain_matches_true_opd_moments():
     assert np.all(r[:, 3] > 0)
 
 
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", PATCH_METHODS)
 def test_gradients_finite_every_method(method):
     """∂L/∂(film fields, α, θ_o) finite for every method, incl. θ_o = 0 and near grazing."""
     def loss(film, theta_o, alpha):

@@ -117,7 +117,9 @@ DEFAULT_PAINT_QUADRATURE = (64, 64)
 #: (n_c, n_φ) of the product rule of the Lambert term (c = cos θ_i ∈ [0, 1], φ ∈ [0, π])
 DEFAULT_DIFFUSE_QUADRATURE = (32, 32)
 #: aluminium at 550 nm (Rakić 1995, Appl. Opt. 34, 4755; refractiveindex.info)
-AL_ETA, AL_KAPPA = 0.96, 6.69
+AL_ETA = 0.96
+#: its extinction coefficient κ (same source)
+AL_KAPPA = 6.69
 
 
 class CarPaint(NamedTuple):

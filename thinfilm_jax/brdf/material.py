@@ -58,9 +58,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core import _validate as V
+from ..core._pytree import pytree_dataclass
 from ..core.film import Film
 from ..optics.fresnel import fresnel_schlick
-from ..spectral.reflectance import METHODS as FILM_METHODS
+from ..spectral.reflectance import RGB_METHODS as FILM_METHODS
 from ..spectral.reflectance import bare_bands, rgb_reflectance
 from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 from . import diffuse as _diffuse
@@ -83,11 +84,6 @@ FRESNELS = ("one", "schlick", "dielectric", "conductor", "film")
 DIFFUSES = _diffuse.DIFFUSES
 #: |‖v‖ − 1| and |⟨t, n⟩| allowed for the direction arguments of `brdf_value`
 UNIT_TOL = 1e-6
-
-
-def _dataclass(cls, data, meta):
-    cls = dataclasses.dataclass(frozen=True)(cls)
-    return jax.tree_util.register_dataclass(cls, data_fields=data, meta_fields=meta)
 
 
 class Specular:
@@ -131,10 +127,10 @@ class Material:
     diffuse: Diffuse
 
 
-Specular = _dataclass(Specular, ["shape_x", "shape_y"], ["ndf", "masking"])
-Fresnel = _dataclass(Fresnel, ["f0", "film"], ["kind", "method", "terms", "observer"])
-Diffuse = _dataclass(Diffuse, ["albedo", "sigma"], ["kind"])
-Material = _dataclass(Material, ["specular", "fresnel", "diffuse"], [])
+Specular = pytree_dataclass(Specular, ["shape_x", "shape_y"], ["ndf", "masking"])
+Fresnel = pytree_dataclass(Fresnel, ["f0", "film"], ["kind", "method", "terms", "observer"])
+Diffuse = pytree_dataclass(Diffuse, ["albedo", "sigma"], ["kind"])
+Material = pytree_dataclass(Material, ["specular", "fresnel", "diffuse"], [])
 
 
 # ----------------------------------------------------------------------------- checks

@@ -96,6 +96,17 @@ from pathlib import Path
 
 from ..interop.index_text import parse_index, parse_layers  # the one parser (fit, render)
 
+__all__ = [
+    "RAW_SUFFIXES",
+    "NOTES",
+    "read_text",
+    "read_csv",
+    "read_observations",
+    "check_output",
+    "add_arguments",
+    "run_fit_cli",
+]
+
 #: Help text for the ``fit`` sub-command (argparse, RawDescriptionHelpFormatter).
 FIT_HELP = """\
 Fit film thickness, IORs and roughness to observations read from CSV or JSON and write the

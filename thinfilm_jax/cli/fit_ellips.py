@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = ["add_parser"]
+
 
 def add_parser(sub) -> None:
     """Register ``fit-ellips`` on the ``thinfilm-jax`` sub-parsers.

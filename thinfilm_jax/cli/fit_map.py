@@ -55,6 +55,8 @@ import numpy as np
 from ..core.methods import names as method_names
 from ._output import gltf_line
 
+__all__ = ["IndexArg", "add_parser"]
+
 #: the parser's numeric options are checked by `_checks.check_args` (usage errors); the
 #: indices by `_index_arg` (they may be materials, so they are stored under other names)
 #: index option → (attribute of the parsed value, lowest value of a number, lowest excluded)

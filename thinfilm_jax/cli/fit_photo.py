@@ -40,6 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = ["PHOTO_SUFFIXES", "add_arguments", "run_photo"]
+
 #: photograph suffixes that need --camera (the band-radiance path reads .npy/.exr/.hdr)
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff")
 #: exit status of --strict when the fit warns that the model does not explain the photo

@@ -12,6 +12,8 @@ import sys
 
 from ._checks import _add_device_options, _devices, _enable_x64
 
+__all__ = ["OWN_SCENE_OPTIONS", "build_parser", "main"]
+
 
 def _figure7(args) -> int:
     devices = _devices(args)

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import jax
 
+__all__ = ["enable_compilation_cache", "cached_host_tables"]
+
 
 def cache_dir() -> Path:
     """The folder the cache uses (not created here)."""

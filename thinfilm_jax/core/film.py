@@ -17,6 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
+__all__ = ["Film"]
+
 
 class Film(NamedTuple):
     """A film of thickness `thickness` (nm) and index `eta_film` on a base `eta_base + i kappa_base`,

@@ -50,6 +50,18 @@ from typing import NamedTuple
 
 import numpy as np
 
+__all__ = [
+    "ENCODINGS",
+    "RAW_SUFFIXES",
+    "Photo",
+    "srgb_decoding",
+    "srgb_encoding",
+    "srgb_decoding_derivative",
+    "estimate_noise",
+    "read_photo",
+    "read_mask",
+]
+
 ENCODINGS = ("srgb", "linear", "raw")
 RAW_SUFFIXES = frozenset(".3fr .arw .cr2 .cr3 .crw .dcr .dng .erf .iiq .kdc .mef .mos .mrw .nef "
                          ".nrw .orf .pef .raf .rw2 .rwl .sr2 .srf .srw .x3f".split())
@@ -77,6 +89,31 @@ class Photo(NamedTuple):
         n = int(self.clipped.sum())
         return (f"{name}: {w}×{h}, {depth}, {_LABELS[self.encoding]}; "
                 f"{n} clipped pixel{'' if n == 1 else 's'}")
+
+
+def srgb_decoding(v) -> np.ndarray:
+    """Linear values L of sRGB-encoded values v (IEC 61966-2-1 EOTF: L = v/12.92 for
+    v ≤ 0.04045, ((v + 0.055)/1.055)^2.4 above), float64, by colour-science's
+    ``cctf_decoding(v, function="sRGB")``: the package's one sRGB decoder (photographs,
+    LDR environment maps, a photo fit's clipping levels).
+
+    Example:
+        >>> float(srgb_decoding(0.5)), float(srgb_encoding(srgb_decoding(0.5)))
+        (0.21404114048223255, 0.5)
+    """
+    import colour  # the IEC 61966-2-1 EOTF
+
+    return np.asarray(colour.cctf_decoding(v, function="sRGB"), np.float64)
+
+
+def srgb_encoding(linear) -> np.ndarray:
+    """sRGB-encoded values of linear values (the inverse of `srgb_decoding`: IEC 61966-2-1's
+    v = 12.92 L for L ≤ 0.0031308, 1.055 L^(1/2.4) − 0.055 above), float64, by colour-science's
+    ``cctf_encoding(L, function="sRGB")``: the package's one sRGB encoder. No clipping: clip
+    to [0, 1] first for display."""
+    import colour  # the IEC 61966-2-1 inverse EOTF
+
+    return np.asarray(colour.cctf_encoding(linear, function="sRGB"), np.float64)
 
 
 def srgb_decoding_derivative(v) -> np.ndarray:
@@ -176,9 +213,7 @@ def read_photo(image, encoding: str | None = "srgb", *, bit_depth: int | None = 
     sigma_q2 = 1 / (12 * (2**bits - 1) ** 2) if bits else 0.0
     sigma_v = np.sqrt(estimate_noise(v, ~clipped) ** 2 + sigma_q2)
     if encoding == "srgb":
-        import colour  # the IEC 61966-2-1 EOTF
-
-        linear = np.asarray(colour.cctf_decoding(v, function="sRGB"), np.float64)
+        linear = srgb_decoding(v)
         noise = sigma_v * srgb_decoding_derivative(v)
     else:
         linear, noise = v, np.broadcast_to(sigma_v, v.shape).copy()

@@ -31,6 +31,16 @@ import numpy as np
 from .film import Film
 from .stack import Stack
 
+__all__ = [
+    "is_dispersive",
+    "needs_stack",
+    "as_stack",
+    "batch_shape",
+    "point_split",
+    "first_point",
+    "expand_batch",
+]
+
 INDEX_FIELDS = ("eta_film", "eta_base", "eta_outer")
 
 

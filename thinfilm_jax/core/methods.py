@@ -48,6 +48,17 @@ from typing import Any, NamedTuple
 from .material import is_dispersive, needs_stack
 from .stack import Stack
 
+__all__ = [
+    "Method",
+    "METHODS",
+    "names",
+    "implementation",
+    "register",
+    "unregister",
+    "material_path",
+    "require",
+]
+
 
 class Method(NamedTuple):
     """One method: its name, where it is offered and what it models."""

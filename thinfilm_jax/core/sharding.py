@@ -60,6 +60,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+__all__ = ["batch_mesh", "map_sharded", "shard_batch", "to_host", "initialize_distributed"]
+
 #: Name of the mesh axis the batch is split along.
 BATCH_AXIS = "batch"
 

@@ -15,6 +15,8 @@ from jax.typing import ArrayLike
 
 from .film import Film
 
+__all__ = ["Stack"]
+
 
 class Stack(NamedTuple):
     """N layers of thicknesses `thickness` (nm, last axis) and indices `eta` on `eta_base`,

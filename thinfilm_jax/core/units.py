@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["HC_EV_NM", "unit_name", "to_nanometres"]
+
 #: hc in eV nm (CODATA 2018)
 HC_EV_NM = 1239.84198
 

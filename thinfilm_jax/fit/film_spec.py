@@ -28,6 +28,8 @@ from . import params as P
 from .engine import from_box, to_box
 from .options import _PATCH_ONLY, BATCHING, DEFAULT_BOUNDS, FILM_PARAMS, FitOptions
 
+__all__ = []
+
 # ----------------------------------------------------------------------------- parameter map
 _to_x, _to_y = to_box, from_box  # the engine's box transform (module docstring)
 

@@ -25,6 +25,8 @@ from ..optics.index import index_at
 from .engine import START_MARGIN, implicit_solution, lm_solve
 from .options import SOLVERS
 
+__all__ = ["solve_multistart", "order_moves", "grid_starts"]
+
 
 def _least_squares(fn, y0, args, max_steps, cfg, implicit):
     """`max_steps` steps of the solver `cfg.solver` on ``fn(y, args) → (n,)`` from y0 →

@@ -91,7 +91,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core import _validate as V
-from ..core.image import Photo, read_mask, read_photo
+from ..core.image import Photo, read_mask, read_photo, srgb_decoding
 from ..spectral.camera import Camera, camera_response, sensitivity_basis
 from . import photo_flags as PF
 from . import pixelwise as PW
@@ -203,12 +203,11 @@ def _check_model(template, camera, illuminant, reference, layer, illumination, v
 
 def _decode(v: float, encoding: str) -> float:
     """The linear value of the encoded value v (IEC 61966-2-1 for "srgb", colour-science's
-    ``cctf_decoding``, as `core.image.read_photo`; else v itself)."""
+    ``cctf_decoding`` through `core.image.srgb_decoding`, as `core.image.read_photo`; else v
+    itself)."""
     if encoding != "srgb":
         return v
-    import colour
-
-    return float(colour.cctf_decoding(v, function="sRGB"))
+    return float(srgb_decoding(v))
 
 
 def _censoring(photo: Photo, lossy: bool) -> tuple[np.ndarray, tuple[float, float]]:

@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["MARGIN_SIGMAS", "reasons", "ambiguous", "fit_notes"]
+
 MARGIN_SIGMAS = 2.0  # another order within this many standard deviations: ambiguous
 NEIGHBOUR_NM = 30.0  # |d − the neighbours' median| above this: a jump between orders
 BEYOND_PADS_NM = 100.0  # thickness this far outside the pads' span (unknown camera)

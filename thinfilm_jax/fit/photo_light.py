@@ -48,6 +48,17 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = [
+    "ILLUMINATIONS",
+    "DEGREE",
+    "N_FIELD",
+    "MIN_IDENTIFIABLE",
+    "basis",
+    "fit_field",
+    "identifiability",
+    "fit_light",
+]
+
 ILLUMINATIONS = ("uniform", "smooth")
 DEGREE = 3  # the field's polynomial degree
 N_FIELD = (DEGREE + 1) * (DEGREE + 2) // 2 - 1  # its parameters, without the constant

@@ -30,6 +30,21 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import nnls
 
+__all__ = [
+    "DISTINCT_NM",
+    "screen",
+    "features",
+    "residual",
+    "bucket",
+    "chunks",
+    "pad_to",
+    "screen_all",
+    "closed_gains",
+    "search_gains",
+    "reference_gains",
+    "matrix_from_pixels",
+]
+
 _HI = jax.lax.Precision.HIGHEST
 _EXPOSURE_LADDER = 2.0 ** np.arange(-2.0, 2.01, 0.5)  # × the brightness-matched exposure
 _SUBSAMPLE = 3000  # pixels for the gain search without references

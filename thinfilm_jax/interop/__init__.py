@@ -11,3 +11,39 @@ Example (glTF nm and OpenPBR µm describe the same film):
     >>> openpbr.film_to_openpbr(film, factor)["thin_film_thickness"]
     0.4
 """
+
+from . import index_text
+from .index_text import *  # noqa: F403 (its __all__)
+from .gltf import (
+    EXTENSION,
+    IOR_EXTENSION,
+    EXTRAS,
+    KAPPA_FILM_MAX,
+    mix,
+    iridescence_mix,
+    film_from_gltf,
+    constant_film,
+    constant_index_error,
+    film_to_gltf,
+    alpha_from_gltf,
+    write_thickness_texture,
+    read_thickness_texture,
+    uv_sphere,
+    write_gltf,
+    load_gltf,
+    read_gltf,
+)
+from .openpbr import film_from_openpbr, film_to_openpbr
+
+# Left to their modules (glTF's and OpenPBR's DEFAULTS differ):
+# DEFAULTS.
+
+#: every module's __all__ (names re-exported by two modules are one object)
+__all__ = [
+    "EXTENSION", "IOR_EXTENSION", "EXTRAS", "KAPPA_FILM_MAX", "mix", "iridescence_mix",
+    "film_from_gltf", "constant_film", "constant_index_error", "film_to_gltf",
+    "alpha_from_gltf", "write_thickness_texture", "read_thickness_texture", "uv_sphere",
+    "write_gltf", "load_gltf", "read_gltf",  # gltf
+    *index_text.__all__,
+    "film_from_openpbr", "film_to_openpbr",  # openpbr
+]

@@ -72,6 +72,27 @@ from ..core._io import atomic_write, write_json
 from ..core.film import Film
 from ..optics.index import is_index_model
 
+__all__ = [
+    "EXTENSION",
+    "IOR_EXTENSION",
+    "DEFAULTS",
+    "EXTRAS",
+    "KAPPA_FILM_MAX",
+    "mix",
+    "iridescence_mix",
+    "film_from_gltf",
+    "constant_film",
+    "constant_index_error",
+    "film_to_gltf",
+    "alpha_from_gltf",
+    "write_thickness_texture",
+    "read_thickness_texture",
+    "uv_sphere",
+    "write_gltf",
+    "load_gltf",
+    "read_gltf",
+]
+
 EXTENSION = "KHR_materials_iridescence"
 IOR_EXTENSION = "KHR_materials_ior"
 #: The schema's defaults (material.KHR_materials_iridescence.schema.json).

@@ -23,6 +23,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+__all__ = ["parse_index", "parse_layers"]
+
 LAYERS_FORM = "MATERIAL:THICKNESS_NM[,...] (layer 0 first, e.g. 'SiO2:250,Si3N4:80')"
 
 

@@ -45,6 +45,8 @@ from ..core import _validate as V
 from ..core.film import Film
 from .gltf import _number  # a finite JSON number in range: one check for both formats
 
+__all__ = ["DEFAULTS", "film_from_openpbr", "film_to_openpbr"]
+
 SPEC_VERSION = "1.1.1"
 #: Defaults of the parameters read here (OpenPBR v1.1.1 parameter tables / .mtlx nodedef).
 DEFAULTS = {"thin_film_weight": 0.0, "thin_film_thickness": 0.5, "thin_film_ior": 1.4,

@@ -25,6 +25,14 @@ from .fresnel import Interfaces, film_interfaces
 from .index import is_index_model
 from .turns import sincos_turns
 
+__all__ = [
+    "choose_arithmetic",
+    "polarised_reflectance",
+    "airy_reflectance",
+    "BLOCK",
+    "broadcast_all",
+]
+
 
 def choose_arithmetic(film: Film, arithmetic: str = "auto") -> str:
     """Resolve ``arithmetic="auto"``: the real dielectric path when the (concrete) film allows it.

@@ -45,6 +45,21 @@ from jax import Array
 
 from ..core.film import Film
 
+__all__ = [
+    "safe_sqrt",
+    "sqrt_upper_parts",
+    "sqrt_upper",
+    "complex_dtype",
+    "as_complex",
+    "safe_div",
+    "sin2_outer",
+    "interface_amplitudes",
+    "Interfaces",
+    "film_interfaces",
+    "normal_reflectance",
+    "fresnel_schlick",
+]
+
 ARITHMETIC = ("real", "complex")
 
 

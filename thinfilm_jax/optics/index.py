@@ -71,6 +71,20 @@ from jax import Array
 from ..core._validate import as_array, check_range, check_real, checking, is_concrete
 from .fresnel import sqrt_upper_parts
 
+__all__ = [
+    "IndexModel",
+    "is_index_model",
+    "index_at",
+    "check_wavelengths",
+    "ConstantIndex",
+    "check_table",
+    "TabulatedIndex",
+    "FormulaIndex",
+    "cauchy",
+    "sellmeier",
+    "CompositeIndex",
+]
+
 _INF_RANGE = (0.0, math.inf)
 #: How `TabulatedIndex` interpolates between its rows: n and κ, or ε = (n + iκ)², linearly in λ.
 INTERPOLATIONS = ("nk", "epsilon")

@@ -48,7 +48,7 @@ from .index import (
 )
 
 
-class Material(NamedTuple):
+class BundledMaterial(NamedTuple):
     """A bundled material: `source` is a file in ``thinfilm_jax/data/materials/`` (a CSV
     with columns ``wavelength_nm,n,k``) or ``"formula N"`` with `coefficients` (λ in µm)."""
 
@@ -64,43 +64,43 @@ _RAKIC = ("A. D. Rakić, A. B. Djurišić, J. M. Elazar and M. L. Majewski, \"Op
           "5271–5283 (1998)")
 _RAKIC_NOTE = "Lorentz–Drude model fitted to measurements of evaporated films"
 
-#: name → `Material`: the bundled materials (add one here, with its table or formula).
-MATERIALS: dict[str, Material] = {
-    "SiO2": Material(
+#: name → `BundledMaterial`: the bundled materials (add one here, with its table or formula).
+MATERIALS: dict[str, BundledMaterial] = {
+    "SiO2": BundledMaterial(
         "I. H. Malitson, \"Interspecimen comparison of the refractive index of fused silica\", "
         "J. Opt. Soc. Am. 55, 1205–1209 (1965)",
         (210.0, 6700.0), "formula 1",
         (0.0, 0.6961663, 0.0684043, 0.4079426, 0.1162414, 0.8974794, 9.896161),
         "fused silica at 20 °C; κ = 0"),
-    "Si": Material(
+    "Si": BundledMaterial(
         "C. Schinke et al., \"Uncertainty analysis for the coefficient of band-to-band "
         "absorption of crystalline silicon\", AIP Advances 5, 067168 (2015)",
         (250.0, 1450.0), "Si-Schinke-2015.csv", None, "crystalline silicon, 300 K"),
-    "Si3N4": Material(
+    "Si3N4": BundledMaterial(
         "H. R. Philipp, \"Optical properties of silicon nitride\", J. Electrochem. Soc. 120, "
         "295–300 (1973)",
         (207.0, 1240.0), "formula 1", (0.0, 2.8939, 0.13967),
         "amorphous (CVD) silicon nitride, a one-term Sellmeier fit to Philipp's data; κ = 0"),
-    "TiO2": Material(
+    "TiO2": BundledMaterial(
         "T. Siefke et al., \"Materials pushing the application limits of wire grid polarizers "
         "further into the deep ultraviolet spectral range\", Adv. Opt. Mater. 4, 1780–1786 "
         "(2016)",
         (200.602492, 1994.510485), "TiO2-Siefke-2016.csv", None,
         "atomic-layer-deposited amorphous TiO2 thin film"),
-    "Al2O3": Material(
+    "Al2O3": BundledMaterial(
         "I. H. Malitson and M. J. Dodge, \"Refractive index and birefringence of synthetic "
         "sapphire\", J. Opt. Soc. Am. 62, 1405 (1972)",
         (200.0, 5000.0), "formula 1",
         (0.0, 1.4313493, 0.0726631, 0.65054713, 0.1193242, 5.3414021, 18.028251),
         "crystalline sapphire, ordinary ray, 20 °C; κ = 0 (amorphous alumina films are "
         "lower, n ≈ 1.6–1.65)"),
-    "MgF2": Material(
+    "MgF2": BundledMaterial(
         "M. J. Dodge, \"Refractive properties of magnesium fluoride\", Appl. Opt. 23, "
         "1980–1985 (1984)",
         (200.0, 7000.0), "formula 1",
         (0.0, 0.48755108, 0.04338408, 0.39875031, 0.09461442, 2.3120353, 23.793604),
         "crystalline MgF2, ordinary ray, 19 °C; κ = 0"),
-    "water": Material(
+    "water": BundledMaterial(
         "M. Daimon and A. Masumura, \"Measurement of the refractive index of distilled water "
         "from the near-infrared region to the ultraviolet region\", Appl. Opt. 46, "
         "3811–3820 (2007)",
@@ -108,21 +108,21 @@ MATERIALS: dict[str, Material] = {
         (0.0, 5.684027565e-1, 5.101829712e-3, 1.726177391e-1, 1.821153936e-2,
          2.086189578e-2, 2.620722293e-2, 1.130748688e-1, 1.069792721e1),
         "distilled water at 20.0 °C; κ = 0"),
-    "Al": Material(_RAKIC, (201.53, 1993.0), "Al-Rakic-1998.csv", None, _RAKIC_NOTE),
-    "Ag": Material(_RAKIC, (247.97, 1992.4), "Ag-Rakic-1998.csv", None, _RAKIC_NOTE),
-    "Au": Material(_RAKIC, (247.97, 1998.0), "Au-Rakic-1998.csv", None, _RAKIC_NOTE),
-    "Cu": Material(_RAKIC, (206.64, 1986.6), "Cu-Rakic-1998.csv", None, _RAKIC_NOTE),
-    "Cr": Material(_RAKIC, (247.97, 1992.2), "Cr-Rakic-1998.csv", None, _RAKIC_NOTE),
+    "Al": BundledMaterial(_RAKIC, (201.53, 1993.0), "Al-Rakic-1998.csv", None, _RAKIC_NOTE),
+    "Ag": BundledMaterial(_RAKIC, (247.97, 1992.4), "Ag-Rakic-1998.csv", None, _RAKIC_NOTE),
+    "Au": BundledMaterial(_RAKIC, (247.97, 1998.0), "Au-Rakic-1998.csv", None, _RAKIC_NOTE),
+    "Cu": BundledMaterial(_RAKIC, (206.64, 1986.6), "Cu-Rakic-1998.csv", None, _RAKIC_NOTE),
+    "Cr": BundledMaterial(_RAKIC, (247.97, 1992.2), "Cr-Rakic-1998.csv", None, _RAKIC_NOTE),
     # 2D materials (SPEC §14): one layer's index, for a film of N × the monolayer thickness
     # (`MONOLAYER_NM`) on thermal oxide
-    "graphene": Material(
+    "graphene": BundledMaterial(
         "J. W. Weber, V. E. Calado and M. C. M. van de Sanden, \"Optical constants of "
         "graphene measured by spectroscopic ellipsometry\", Appl. Phys. Lett. 97, 091904 "
         "(2010)",
         (210.873, 999.007), "graphene-Weber-2010.csv", None,
         "mechanically exfoliated monolayer on 98 nm SiO2 on Si, in-plane index, fitted as a "
         "0.34 nm layer"),
-    "MoS2": Material(
+    "MoS2": BundledMaterial(
         "G. A. Ermolaev et al., \"Broadband optical properties of monolayer and bulk MoS2\", "
         "npj 2D Mater. Appl. 4, 21 (2020)",
         (290.0, 2000.0), "MoS2-Ermolaev-2020.csv", None,
@@ -392,4 +392,6 @@ def read_yaml(path) -> IndexModel:
     return CompositeIndex(n_model, k_models[0], name=name, citation=citation)
 
 
-__all__ = ["MATERIALS", "MONOLAYER_NM", "Material", "read_csv", "read_yaml", "refractive_index"]
+__all__ = [
+    "MATERIALS", "MONOLAYER_NM", "BundledMaterial", "read_csv", "read_yaml", "refractive_index",
+]

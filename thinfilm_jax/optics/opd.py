@@ -36,6 +36,15 @@ from ..core import _validate as V
 from ..core.film import Film
 from .fresnel import safe_div, safe_sqrt
 
+__all__ = [
+    "OPDMoments",
+    "cos_incidence_from_projection",
+    "opd_of_cos",
+    "taylor_opd_moments",
+    "project_light_moments",
+    "opd_moments_exact",
+]
+
 
 class OPDMoments(NamedTuple):
     """Mean μ_D and standard deviation σ_D of the optical path difference (nm)."""

@@ -40,6 +40,15 @@ from .turns import sincos_turns
 from ..core.film import Film
 from .fresnel import as_complex, film_interfaces, safe_div, sqrt_upper_parts
 
+__all__ = [
+    "SeriesTerms",
+    "series_terms",
+    "series_reflectance",
+    "fourier_band_reflectance",
+    "FusedTerms",
+    "fused_terms",
+]
+
 
 class SeriesTerms(NamedTuple):
     """BB17 terms of one film at one angle. Leading axis of c0, amp, z is (s, p)."""

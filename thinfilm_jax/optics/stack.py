@@ -81,6 +81,17 @@ from .turns import sincos_turns
 from .fresnel import complex_dtype, interface_amplitudes, sin2_outer, sqrt_upper
 from .index import index_at, is_index_model
 
+__all__ = [
+    "POLARISATIONS",
+    "check_stack",
+    "check_index",
+    "stack_reflectance",
+    "stack_transmittance",
+    "stack_reflectance_traced",
+    "stack_amplitudes",
+    "stack_amplitudes_traced",
+]
+
 POLARISATIONS = ("s", "p", "unpolarised")
 
 _LAYERS = ("auto", "loop", "scan")

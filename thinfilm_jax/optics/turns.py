@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+__all__ = ["sincos_turns"]
+
 
 def _taylor(n: int, odd: bool) -> tuple:
     """Taylor coefficients of sin(x)/x − 1 (odd) or cos(x) − 1 in powers of z = x², z¹ … zⁿ."""

@@ -35,6 +35,8 @@ from ..optics.series import fourier_band_reflectance, fused_terms, series_terms
 from ..spectral.lut import ShatLUT, carrier_parts, read_parts
 from ..spectral.spectra import sensitivity_ft, shat_at_zero
 
+__all__ = ["SHAT_SOURCES", "filtered_bands", "split_by_light"]
+
 SHAT_SOURCES = ("exact", "lut", "gaussian")
 UNROLLED_READS = ("cubic", "linear_mu")  # ≥ 8 taps: one loop for all orders (`_read_orders`)
 

@@ -81,6 +81,8 @@ from .improved import DEFAULT_BINS, ImprovedOptions
 from ..brdf.microfacet import DEFAULT_QUADRATURE, NDFS
 from ..spectral.reflectance import LAYERS
 
+__all__ = ["PRESETS", "ModelOptions", "check_options"]
+
 ARITHMETIC_CHOICES = ("auto", "real", "complex")
 #: the named quality settings of `improved` (module docstring): fields that differ from
 #: `ModelOptions()`

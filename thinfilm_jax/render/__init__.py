@@ -12,3 +12,21 @@ Nothing in the layers below imports this package. The research studies and bench
 measure the library are not part of it: they live in the repository's ``benchmarks/`` folder
 (``python -m benchmarks.bench`` from a clone).
 """
+
+from . import bubble, figure7, plot, scene, scene_material, study_scenes
+from .bubble import *  # noqa: F403 (its __all__)
+from .figure7 import *  # noqa: F403 (its __all__)
+from .plot import *  # noqa: F403 (its __all__)
+from .scene import *  # noqa: F403 (its __all__)
+from .scene_material import *  # noqa: F403 (its __all__)
+from .study_scenes import *  # noqa: F403 (its __all__)
+
+#: every module's __all__ (names re-exported by two modules are one object)
+__all__ = [
+    *bubble.__all__,
+    *figure7.__all__,
+    *plot.__all__,
+    *scene.__all__,
+    *scene_material.__all__,
+    *study_scenes.__all__,
+]

@@ -18,6 +18,8 @@ from ..core.stack import Stack
 from ..optics.materials import refractive_index
 from ..spectral.spectra import DEFAULT_OBSERVER, get_observer
 
+__all__ = ["bubble_thickness", "bubble_paths", "bubble_factors"]
+
 
 def bubble_thickness(z, top: float = 30.0, bottom: float = 1200.0):
     """d = top + (bottom − top)·√(ψ/π), ψ = arccos z the polar angle from the top pole (nm)."""

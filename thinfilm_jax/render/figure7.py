@@ -40,6 +40,20 @@ from ..realtime.options import ModelOptions
 from ..shading.patch import patch_radiance
 from ..core.sharding import batch_mesh, map_sharded, to_host
 
+__all__ = [
+    "METHOD_ORDER",
+    "ROWS",
+    "Figure7Config",
+    "grids",
+    "row_inputs",
+    "patch_block",
+    "compute_figure7",
+    "error_summary",
+    "render_figure7",
+    "render_error",
+    "run_figure7",
+]
+
 METHOD_ORDER = ("ideal", "filtered_gt_moments", "filtered_gt_opd", "reference")
 METHOD_TITLES = {
     "ideal": "ideal direction (BB17)",

@@ -18,6 +18,8 @@ Example:
 
 from __future__ import annotations
 
+__all__ = ["figure", "subplots", "close", "get_cmap"]
+
 INSTALL_HINT = ("matplotlib is needed to draw figures (figure7, render, fit-map's PNGs): "
                 "pip install 'thinfilm_jax[plots]'")
 

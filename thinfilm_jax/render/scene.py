@@ -97,6 +97,22 @@ from .scene_material import (check_methods, describe, index_from_json, index_jso
                              make_material, material_from_json, material_json)
 from .study_scenes import PANEL_DPI, fit_title, panel_inches
 
+__all__ = [
+    "OWN_SCENES",
+    "pinhole",
+    "hit_sphere",
+    "exposure_of",
+    "write_exr",
+    "plot_panels",
+    "SceneConfig",
+    "shade_bubble",
+    "default_out_dir",
+    "render_scene",
+    "throughput_label",
+    "format_summary",
+    "config_from_dict",
+]
+
 OWN_SCENES = ("sphere", "bubble")
 DISTANCE = 5.0  # camera distance / sphere radius
 FILL = 0.87  # the sphere's diameter / the frame's side

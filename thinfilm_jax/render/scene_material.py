@@ -25,6 +25,16 @@ from ..interop.index_text import parse_index
 from ..optics.index import is_index_model
 from ..optics.materials import MATERIALS, refractive_index
 
+__all__ = [
+    "make_material",
+    "describe",
+    "check_methods",
+    "index_json",
+    "index_from_json",
+    "material_json",
+    "material_from_json",
+]
+
 
 def make_material(thickness=600.0, eta_film=1.2, eta_base=2.0, *, layers=None, eta_outer=1.0):
     """A `Film` (one layer) or a `Stack` (`layers` with two or more) from parsed values.

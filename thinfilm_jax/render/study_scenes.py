@@ -16,10 +16,10 @@ Scenes (SPEC §9):
 
 Camera: orthographic, looking horizontally-down (15°) at a unit sphere, its azimuth chosen
 so that the brightest texel of the map is reflected off-centre (deterministic). Behind the
-sphere the map itself is shown (linear RGB). Every method shades the same pixels (`METHODS`;
-default columns `DEFAULT_METHODS`): reference (texel-space quadrature, float64), mc (Monte
-Carlo), and the real-time ideal, filtered and improved (prefiltered map, float64 here; the
-float32 frame timings are in the benchmark). ideal and filtered read the map as it is (the
+sphere the map itself is shown (linear RGB). Every method shades the same pixels
+(`FILM_MAP_METHODS`; default columns `DEFAULT_METHODS`): reference (texel-space quadrature,
+float64), mc (Monte Carlo), and the real-time ideal, filtered and improved (prefiltered map,
+float64 here; the float32 frame timings are in the benchmark). ideal and filtered read the map as it is (the
 published methods); improved reads it with its suns split off and shaded apart
 (`prefilter_envmap(sources=ibl.DEFAULT_SOURCES)`, `thinfilm_jax.shading.sources`), as
 `envmap_radiance(method="improved")` does with a plain map. khr (glTF `KHR_materials_iridescence`,
@@ -61,6 +61,7 @@ from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
 from ..spectral.spectra import DEFAULT_OBSERVER
 from ..shading.envmap import SHIPPED, downsample, load_envmap, lookup_bilinear, luminance_weights
 from ..core.film import Film
+from ..core.image import srgb_encoding
 from ..core.methods import implementation
 from ..core.methods import names as method_names
 from ..shading.ibl import REALTIME_OPTIONS, auto_subdivisions, envmap_radiance
@@ -70,6 +71,30 @@ from ..core.sharding import batch_mesh, map_sharded, to_host
 from ..brdf.carpaint import PAINTS
 from ..shading.carpaint_ibl import paint_envmap_radiance
 from ..shading.colour_table import colour_table_radiance, prefilter_colour
+
+__all__ = [
+    "PAINT_TABLE",
+    "PAINT_METHODS",
+    "FILM_MAP_METHODS",
+    "envmap_methods",
+    "DEFAULT_METHODS",
+    "RenderConfig",
+    "camera",
+    "sphere",
+    "thickness_field",
+    "map_label",
+    "scene_setups",
+    "view_azimuth",
+    "shade_block",
+    "method_map",
+    "render_one",
+    "summarise",
+    "summary_table",
+    "PANEL_DPI",
+    "panel_inches",
+    "fit_title",
+    "run_render",
+]
 
 #: the paints' table size: 8 × 16 directions ω_r, 8 views, 4 azimuths (their build evaluates
 #: the paint's brightness and colour at every texel node for each configuration); also the
@@ -81,11 +106,11 @@ ALL_SCENES = SCENES + ("carpaint",)
 PAINT_METHODS = ("reference", "colour_table")  # the columns of the car-paint scene
 # every `envmap_radiance` method of the registry (core/methods.py) that shades a film varying
 # per pixel; "colour_table" tabulates one homogeneous material (the car-paint scene's column)
-METHODS = tuple(m for m in method_names("envmap") if m != "colour_table")
+FILM_MAP_METHODS = tuple(m for m in method_names("envmap") if m != "colour_table")
 
 
 def envmap_methods() -> tuple[str, ...]:
-    """`METHODS` as the registry holds them now (a method registered at run time included):
+    """`FILM_MAP_METHODS` as the registry holds them now (a method registered at run time included):
     every `envmap_radiance` method that shades a film varying per pixel."""
     return tuple(m for m in method_names("envmap")
                  if implementation(m).envmap_kind in ("realtime", "exact"))
@@ -313,9 +338,7 @@ def _methods(r, cfg) -> tuple:
 
 
 def _image(r, vals, exposure, observer):
-    import colour
-
-    img = np.clip(colour.cctf_encoding(np.clip(r["background"] * exposure * 0.5, 0, 1)), 0, 1)
+    img = np.clip(srgb_encoding(np.clip(r["background"] * exposure * 0.5, 0, 1)), 0, 1)
     img[r["mask"]] = bands_to_srgb(vals * exposure, observer)
     return img
 

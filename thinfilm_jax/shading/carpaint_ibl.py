@@ -66,9 +66,9 @@ from .envmap import EnvMap, load_envmap, lookup_nearest
 from .ibl_integrand import _local_frame, texel_nodes
 from .ibl_reference import auto_subdivisions
 
-__all__ = ["paint_patch_radiance", "paint_envmap_radiance", "METHODS"]
+__all__ = ["paint_patch_radiance", "paint_envmap_radiance", "PAINT_ENVMAP_METHODS"]
 
-METHODS = ("reference", "mc")
+PAINT_ENVMAP_METHODS = ("reference", "mc")
 HIGHEST = jax.lax.Precision.HIGHEST
 
 
@@ -246,7 +246,7 @@ def paint_envmap_radiance(paint: C.CarPaint, normal, view, envmap, *, method: st
         return_stderr: also return the MC standard error (zeros for "reference").
     """
     C.check_paint(paint)
-    V.check_choice("method", method, METHODS)
+    V.check_choice("method", method, PAINT_ENVMAP_METHODS)
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
     for name, v in (("normal", normal), ("view", view)):
         V.check_finite(name, v)

@@ -76,6 +76,7 @@ from ..brdf.carpaint import (CarPaint, brightness_and_colour, check_paint, coat_
                              lobe_albedo)
 from ..brdf.microfacet import albedo
 from ..core import _validate as V
+from ..core._pytree import pytree_dataclass
 from ..core.film import Film
 from ..optics.airy import choose_arithmetic
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
@@ -91,11 +92,6 @@ __all__ = ["ColourTable", "prefilter_colour", "colour_table_radiance", "check_co
 
 HIGHEST = jax.lax.Precision.HIGHEST
 N_ALBEDO = 64  # nodes of A(θ_o) in √cos θ_o
-
-
-def _dataclass(cls, data, meta):
-    cls = dataclasses.dataclass(frozen=True)(cls)
-    return jax.tree_util.register_dataclass(cls, data_fields=data, meta_fields=meta)
 
 
 class ColourTable:
@@ -142,9 +138,9 @@ class ColourTable:
                 "brightness": item(self.brightness) + item(self.albedo)}
 
 
-ColourTable = _dataclass(ColourTable, ["colour", "view", "full", "brightness", "albedo"],
-                         ["terms", "alphas", "material", "envmap", "observer", "cross",
-                          "build_seconds"])
+ColourTable = pytree_dataclass(ColourTable, ["colour", "view", "full", "brightness", "albedo"],
+                               ["terms", "alphas", "material", "envmap", "observer", "cross",
+                                "build_seconds"])
 
 
 # ----------------------------------------------------------------------------- fingerprints

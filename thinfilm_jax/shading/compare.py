@@ -38,8 +38,10 @@ from ..spectral.colorimetry import delta_e2000
 from ..spectral.spectra import DEFAULT_OBSERVER
 from .colour_table import prefilter_colour
 from .envmap import EnvMap, load_envmap
-from .ibl import DEFAULT_SOURCES, METHODS, envmap_radiance  # noqa: F401 (re-exported)
+from .ibl import DEFAULT_SOURCES, ENVMAP_METHODS, envmap_radiance  # noqa: F401 (re-exported)
 from .prefilter import PrefilteredEnvMap, prefilter_envmap
+
+__all__ = ["DEFAULT_METHODS", "Comparison", "compare_methods"]
 
 #: What `compare_methods` runs by default: the reference and the real-time methods (Monte
 #: Carlo and the per-film colour table only when asked for).

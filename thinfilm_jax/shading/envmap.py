@@ -42,6 +42,26 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from ..core.image import srgb_decoding
+
+__all__ = [
+    "DATA",
+    "SHIPPED",
+    "EnvMap",
+    "load_envmap",
+    "save_envmap",
+    "texel_solid_angles",
+    "direction",
+    "texel_centers",
+    "to_equirect",
+    "lookup_nearest",
+    "lookup_bilinear",
+    "bilinear_taps",
+    "read_taps",
+    "downsample",
+    "luminance_weights",
+]
+
 DATA = Path(__file__).resolve().parents[1] / "data" / "envmaps"
 SHIPPED = {
     "venice_sunset": DATA / "venice_sunset_256.hdr",
@@ -145,10 +165,8 @@ def _read_image(path: Path, what: str, *, ldr_srgb: bool = False) -> np.ndarray:
     if px.ndim != 3 or px.shape[-1] < 3:
         _fail(what, f"expected an RGB image, got {px.shape[-1] if px.ndim == 3 else 1} channel(s)")
     px = px[..., :3]
-    if integer and ldr_srgb:
-        import colour  # the sRGB EOTF, IEC 61966-2-1 (module docstring)
-
-        px = np.asarray(colour.cctf_decoding(px, function="sRGB"), np.float64)
+    if integer and ldr_srgb:  # the sRGB EOTF, IEC 61966-2-1 (module docstring)
+        px = srgb_decoding(px)
     return px
 
 

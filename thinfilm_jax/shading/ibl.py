@@ -66,20 +66,25 @@ from ..optics.airy import choose_arithmetic
 from ..realtime.options import ModelOptions, check_options
 from ..spectral.reflectance import band_centroids, band_film
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
-from .carpaint_ibl import METHODS as PAINT_METHODS
+from .carpaint_ibl import PAINT_ENVMAP_METHODS as PAINT_METHODS
 from .carpaint_ibl import paint_envmap_radiance
 from .colour_table import ColourTable
 from .envmap import EnvMap, load_envmap
 from .ibl_integrand import _interp, _lobe_cos_weight, _r_table, texel_nodes  # noqa: F401 (re-exported)
 from .ibl_reference import auto_subdivisions, exact_radiance  # noqa: F401 (re-exported)
-from .material_ibl import METHODS as MATERIAL_METHODS
+from .material_ibl import MATERIAL_ENVMAP_METHODS as MATERIAL_METHODS
 from .material_ibl import material_envmap_radiance
 from .methods import DEFAULT_SOURCES  # noqa: F401 (re-exported)
 from .methods.filtered import MAP_SHAT_READ  # noqa: F401 (re-exported)
 from .methods.improved import improved_envmap  # noqa: F401 (re-exported)
 from .prefilter import PrefilteredEnvMap, prefilter_envmap
 
-METHODS = method_names("envmap")  # the built-in methods, the registry's order (core/methods.py)
+__all__ = [
+    "ENVMAP_METHODS", "REALTIME_OPTIONS", "HIGHEST", "envmap_radiance", "ENVMAP_KIND_METHODS",
+]
+
+#: the built-in methods, the registry's order (core/methods.py)
+ENVMAP_METHODS = method_names("envmap")
 REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST
 
@@ -259,7 +264,7 @@ def _one_film_envmap(film, alpha, normal, view, envmap, method, observer, *, opt
 _LOBE_KEYWORDS = dict(cross_band=True, subdivisions=None, n_cos=1024, n_samples=4096,
                       key=None, batch_size=None)
 #: the methods of the material kinds that carry their own lobe
-KIND_METHODS = {Material: MATERIAL_METHODS, CarPaint: PAINT_METHODS}
+ENVMAP_KIND_METHODS = {Material: MATERIAL_METHODS, CarPaint: PAINT_METHODS}
 
 
 def _lobe_kind(fn, takes):
@@ -268,7 +273,7 @@ def _lobe_kind(fn, takes):
         if alpha is not None:
             raise ValueError(f"alpha must be None for a {type(material).__name__} (it carries "
                              f"its own lobe), got {alpha!r}")
-        V.check_choice("method", method, KIND_METHODS[type(material)])
+        V.check_choice("method", method, ENVMAP_KIND_METHODS[type(material)])
         given = {k: kw[k] for k in takes if kw[k] is not _LOBE_KEYWORDS[k]
                  and not (isinstance(kw[k], int) and kw[k] == _LOBE_KEYWORDS[k])}
         return fn(material, normal, view, envmap, method=method, **given, **kind_options)

@@ -78,6 +78,14 @@ from ..core.material import first_point, point_split
 from ..brdf.microfacet import smith_g2
 from ..spectral.uplift import cross_band_name
 
+__all__ = [
+    "block_interpolant",
+    "block_size",
+    "refine_counts",
+    "level3_blocks",
+    "adaptive_radiance",
+]
+
 
 def _select(score, k: int, iterations: int = 20):
     """Indices (k,) of blocks with the largest scores, padded with len(score): those above

@@ -28,6 +28,8 @@ from ..core.material import expand_batch
 from ..brdf.microfacet import normal_distribution, smith_g2
 from ..spectral.reflectance import spectral_bands
 
+__all__ = ["HIGHEST", "sub_nodes", "texel_nodes"]
+
 HIGHEST = jax.lax.Precision.HIGHEST
 
 

@@ -81,6 +81,14 @@ from ..brdf.microfacet import smith_g1, smith_g2
 from ..spectral.reflectance import spectral_bands
 from ..spectral.uplift import cross_band_name
 
+__all__ = [
+    "auto_subdivisions",
+    "resample_factor",
+    "exact_radiance",
+    "GrazingLobeWarning",
+    "exact_stack_envmap",
+]
+
 MIN_HEIGHT = 128  # large maps are never resampled below the shipped maps' 128 rows
 
 

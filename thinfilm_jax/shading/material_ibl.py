@@ -66,9 +66,9 @@ from .ibl_integrand import _interp, _local_frame, _r_table, texel_nodes
 from .ibl_reference import auto_subdivisions
 from .material_patch import diffuse_only
 
-__all__ = ["material_envmap_radiance", "METHODS", "effective_alpha"]
+__all__ = ["material_envmap_radiance", "MATERIAL_ENVMAP_METHODS", "effective_alpha"]
 
-METHODS = ("reference", "mc")
+MATERIAL_ENVMAP_METHODS = ("reference", "mc")
 SPECTRAL_FRESNELS = ("film", "dielectric", "conductor")
 HIGHEST = jax.lax.Precision.HIGHEST
 
@@ -212,7 +212,7 @@ def material_envmap_radiance(material: M.Material, normal, view, envmap, *, tang
     parameters, normal and view (the map size, s and the sample count are static).
     """
     M.check_material(material)
-    V.check_choice("method", method, METHODS)
+    V.check_choice("method", method, MATERIAL_ENVMAP_METHODS)
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
     for name, v in (("normal", normal), ("view", view)):
         if np.shape(v)[-1:] != (3,):

@@ -67,9 +67,19 @@ from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .carpaint_ibl import paint_patch_radiance
 from .material_patch import material_patch_radiance
 
-METHODS = method_names("patch")  # the built-in methods, the registry's order (core/methods.py)
+__all__ = [
+    "PATCH_METHODS",
+    "PATCH_KIND_METHODS",
+    "patch_radiance",
+    "stack_patch_one",
+    "patch_one",
+    "patch_radiance_mc",
+]
+
+#: the built-in methods, the registry's order (core/methods.py)
+PATCH_METHODS = method_names("patch")
 #: the methods of the material kinds that carry their own lobe (`Material`, `CarPaint`)
-KIND_METHODS = {Material: ("reference",), CarPaint: ("reference",)}
+PATCH_KIND_METHODS = {Material: ("reference",), CarPaint: ("reference",)}
 
 
 def _check_patch_args(film, theta_o, alpha, method, observer, options):
@@ -178,12 +188,12 @@ def _film_patch(film, theta_o, alpha, method, kw, kind_options):
 
 def _lobe_kind(fn):
     """The handler of a material kind that carries its own lobe (no `alpha`, its methods
-    `KIND_METHODS`; observer, options, lut and batch_size are the films')."""
+    `PATCH_KIND_METHODS`; observer, options, lut and batch_size are the films')."""
     def handler(material, theta_o, alpha, method, kw, kind_options):
         if alpha is not None:
             raise ValueError(f"alpha must be None for a {type(material).__name__} (it carries "
                              f"its own lobe), got {alpha!r}")
-        V.check_choice("method", method, KIND_METHODS[type(material)])
+        V.check_choice("method", method, PATCH_KIND_METHODS[type(material)])
         return fn(material, theta_o, **kind_options)
     return handler
 

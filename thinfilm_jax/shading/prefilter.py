@@ -59,6 +59,21 @@ from .sources import Sources, extract_sources, with_film_tables
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 from ..spectral.uplift import cross_band_name
 
+__all__ = [
+    "MOMENT_RESOLUTION",
+    "VARIANCE_RESOLUTION",
+    "PrefilteredEnvMap",
+    "level_source",
+    "filter_level",
+    "prefilter_envmap",
+    "albedo_table",
+    "lookup_prefiltered",
+    "lookup_radiance",
+    "lookup_albedo",
+    "bin_radiance",
+    "moments_to_mean_cov",
+]
+
 MOMENTS = ("luminance", "per_channel")
 #: moves of ⟨ω_o, mean light direction⟩ below this are the prefilter's own error
 #: (`methods.improved.bin_radiance_parts`)

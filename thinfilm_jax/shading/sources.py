@@ -73,6 +73,16 @@ from ..optics.opd import cos_incidence_from_projection, taylor_opd_moments
 from ..spectral.spectra import Observer, get_observer
 from ..spectral.uplift import cross_band_name
 
+__all__ = [
+    "FilmTable",
+    "Sources",
+    "extract_sources",
+    "with_film_tables",
+    "cap_nodes",
+    "source_radiance",
+    "source_light",
+]
+
 #: (rings, angles per ring) of the cap rule (`cap_rule`): the axis and one ring of 4, 5 nodes
 DEFAULT_CAP_RULE = (1, 4)
 

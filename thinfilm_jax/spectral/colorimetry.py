@@ -68,8 +68,24 @@ import functools
 
 import numpy as np
 
+from ..core.image import srgb_encoding
 from .spectra import DEFAULT_OBSERVER, get_observer
 from .uplift import basis_on
+
+__all__ = [
+    "CIE_1931",
+    "band_to_xyz_matrix",
+    "bands_to_xyz",
+    "white_xy",
+    "rec709_to_band_matrix",
+    "bands_to_rec709",
+    "rec709_to_bands",
+    "xyz_to_srgb",
+    "bands_to_srgb",
+    "uplift_to_bands",
+    "delta_e2000",
+    "delta_e2000_rec709",
+]
 
 #: The CIE 1931 2° observer: the one glTF's `khr` sensitivity fit approximates.
 CIE_1931 = "cie_1931_2"
@@ -194,9 +210,7 @@ def bands_to_srgb(values, observer: str = DEFAULT_OBSERVER, exposure: float = 1.
 
 
 def _encode(rgb):
-    import colour
-
-    return np.asarray(colour.cctf_encoding(np.clip(rgb, 0.0, 1.0), function="sRGB"), float)
+    return srgb_encoding(np.clip(rgb, 0.0, 1.0))
 
 
 @functools.cache

@@ -88,6 +88,17 @@ from .colorimetry import CIE_1931, delta_e2000_rec709, rec709_to_band_matrix
 from .colorimetry import bands_to_rec709 as bands_to_rec709  # re-exported (module docstring)
 from .colorimetry import rec709_to_bands as rec709_to_bands
 
+__all__ = [
+    "XYZ_TO_REC709",
+    "FIT_NORM",
+    "TERMS",
+    "sensitivity_rec709",
+    "khr_bands",
+    "khr_reflectance",
+    "delta_e_to_exact",
+    "khr_to_bands",
+]
+
 #: XYZ → linear Rec. 709 RGB as printed by the extension (row-major here; the GLSL `mat3` is
 #: column-major). Checked against the primaries and D65 in tests/spectral/test_khr.py.
 XYZ_TO_REC709 = np.array([[3.2404542, -1.5371385, -0.4985314],

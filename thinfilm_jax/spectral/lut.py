@@ -50,6 +50,16 @@ from ..core import _validate as V
 from ..optics.fresnel import complex_dtype
 from .spectra import DEFAULT_OBSERVER, Observer, get_observer, shat_host
 
+__all__ = [
+    "ShatLUT",
+    "alias_free_path",
+    "build_shat_lut",
+    "read_parts",
+    "carrier_parts",
+    "lookup",
+    "lut_max_error",
+]
+
 
 class ShatLUT(NamedTuple):
     """Demodulated table of Ŝ_j(μ, σ²) on a uniform (|μ|, σ) grid (a pytree of arrays).

@@ -37,7 +37,21 @@ from ..optics.series import fourier_band_reflectance, series_terms
 from .khr import _khr_jit
 from .spectra import DEFAULT_OBSERVER, SHAT_METHODS, get_observer, sensitivity_ft, shat_at_zero
 
-METHODS = method_names("rgb")  # the registry's order (core/methods.py)
+__all__ = [
+    "RGB_METHODS",
+    "LAYERS",
+    "choose_layer",
+    "bare_bands",
+    "rgb_reflectance",
+    "band_centroids",
+    "band_film",
+    "per_band",
+    "stack_bands",
+    "spectral_bands",
+    "fourier_bands",
+]
+
+RGB_METHODS = method_names("rgb")  # the registry's order (core/methods.py)
 LAYERS = ("auto", "film", "bare")
 
 
@@ -96,7 +110,7 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
         (3,)
     """
     V.check_choice("observer", observer, ("stiles_burch_1959_10", "cie_1931_2"))
-    V.check_choice("method", method, METHODS)
+    V.check_choice("method", method, RGB_METHODS)
     path = material_path(film, method)  # a Stack, or a Film with index models (SPEC §12)
     if path != "film":
         if path == "bands":  # a dispersive single film: indices at each band's centroid

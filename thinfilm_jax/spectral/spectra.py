@@ -43,6 +43,20 @@ from jax import Array
 
 from ..core import _validate as V
 
+__all__ = [
+    "OBSERVERS",
+    "DEFAULT_OBSERVER",
+    "SHAT_METHODS",
+    "Observer",
+    "trapezoid_weights",
+    "get_observer",
+    "sensitivity_ft",
+    "shat_host",
+    "shat_at_zero",
+    "gaussian_fit",
+    "gaussian_fit_error",
+]
+
 OBSERVERS = {
     "stiles_burch_1959_10": "Stiles & Burch 1959 10 Degree RGB CMFs",
     "cie_1931_2": "CIE 1931 2 Degree Standard Observer",

@@ -39,6 +39,8 @@ import functools
 
 import numpy as np
 
+__all__ = ["BASIS", "SEPARATOR", "cross_band_name", "basis_on", "cross_band_weights"]
+
 BASIS = "mallett2019"
 SEPARATOR = "+"
 

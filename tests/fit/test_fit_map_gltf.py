@@ -18,7 +18,8 @@ import pytest
 from thinfilm_jax import Film
 from thinfilm_jax.cli.main import main
 from thinfilm_jax.fit.thickness_map import render_patch_map
-from thinfilm_jax.interop.gltf import read_gltf, read_thickness_texture
+from thinfilm_jax.interop.gltf import read_thickness_texture
+from thinfilm_jax.interop.gltf_file import read_gltf
 
 H = W = 8
 ALPHA = 0.2

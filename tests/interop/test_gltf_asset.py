@@ -1,4 +1,4 @@
-"""The glTF assets of `interop.gltf.write_gltf` open in a viewer: the Khronos glTF-Validator
+"""The glTF assets of `interop.gltf_file.write_gltf` open in a viewer: the Khronos glTF-Validator
 (the npm package `gltf-validator`, run by Node) reports no error, no warning and no unused
 object, for `.gltf` and `.glb`, with and without a thickness texture, and for the asset of
 ``thinfilm-jax fit-map --gltf``. They read back (`read_gltf`, `alpha_from_gltf`) as written.
@@ -22,6 +22,7 @@ import pytest
 
 from thinfilm_jax import Film
 from thinfilm_jax.interop import gltf as G
+from thinfilm_jax.interop import gltf_file as GF
 
 VALIDATOR = "gltf-validator@2.0.0-dev.3.10"  # the version these tests were measured with
 ALPHA = 0.1
@@ -101,7 +102,7 @@ def test_asset_validates_and_reads_back(validate, tmp_path, suffix, textured):
     """
     thickness = _map() if textured else 420.0
     path = tmp_path / f"film{suffix}"
-    doc = G.write_gltf(path, Film(thickness, 1.33, 1.5), 0.8, alpha=ALPHA)
+    doc = GF.write_gltf(path, Film(thickness, 1.33, 1.5), 0.8, alpha=ALPHA)
     (report,) = validate(path)
     assert _problems(report) == []
     info = report["info"]
@@ -118,8 +119,8 @@ def test_asset_validates_and_reads_back(validate, tmp_path, suffix, textured):
                 ".gltf": {"film.gltf", "film.bin"} | ({"film_thickness.png"} if textured
                                                       else set())}[suffix]
     assert {p.name for p in tmp_path.iterdir()} == expected  # nothing else, no temporary
-    assert G.load_gltf(path) == json.loads(json.dumps(doc))
-    film, factor = G.read_gltf(path)
+    assert GF.load_gltf(path) == json.loads(json.dumps(doc))
+    film, factor = GF.read_gltf(path)
     assert factor == 0.8 and tuple(film[1:]) == (1.33, 1.5, 0.0, 1.0)
     if textured:
         d = _map()
@@ -128,14 +129,14 @@ def test_asset_validates_and_reads_back(validate, tmp_path, suffix, textured):
         assert np.abs(np.asarray(film.thickness) - d).max() <= bound * (1 + 1e-9)
     else:
         assert film.thickness == 420.0
-    assert G.alpha_from_gltf(G.load_gltf(path)["materials"][0]) == pytest.approx(ALPHA,
+    assert G.alpha_from_gltf(GF.load_gltf(path)["materials"][0]) == pytest.approx(ALPHA,
                                                                                  rel=3e-16)
 
 
 def test_validator_flags_what_the_old_writer_wrote(validate, tmp_path):
     """The check is not vacuous: a material-only document (the writer before the complete
     asset) is UNUSED_OBJECT /materials/0, and POSITION without min/max is an error."""
-    G.write_gltf(tmp_path / "ok.gltf", Film(400.0, 1.3, 1.5), alpha=0.2)
+    GF.write_gltf(tmp_path / "ok.gltf", Film(400.0, 1.3, 1.5), alpha=0.2)
     doc = json.loads((tmp_path / "ok.gltf").read_text())
     (tmp_path / "material_only.gltf").write_text(json.dumps(
         {k: doc[k] for k in ("asset", "extensionsUsed", "materials")}))
@@ -164,7 +165,7 @@ def test_fit_map_gltf_asset_validates(validate, tmp_path):
                  str(tmp_path / "gltf"), "--quiet"]) == 0
     (report,) = validate(tmp_path / "gltf" / "fit_map.gltf")
     assert _problems(report) == [] and report["info"]["hasDefaultScene"]
-    material = G.load_gltf(tmp_path / "gltf" / "fit_map.gltf")["materials"][0]
+    material = GF.load_gltf(tmp_path / "gltf" / "fit_map.gltf")["materials"][0]
     assert material["pbrMetallicRoughness"]["roughnessFactor"] == math.sqrt(0.2)
 
 
@@ -174,7 +175,7 @@ def test_sphere_mesh():
     seen from outside (glTF's front face; every one), none degenerate, every vertex used, texcoords
     in [0, 1] with v = 0 at the north pole (+Y) and the map's centre facing +Z; its area tends to 4π
     from below (measured 12.316 at 16 × 32, 4π = 12.566)."""
-    p, n, uv, tri = G.uv_sphere(16, 32)
+    p, n, uv, tri = GF.uv_sphere(16, 32)
     np.testing.assert_allclose((p * p).sum(-1), 1.0, rtol=0, atol=1e-15)
     np.testing.assert_array_equal(n, p)
     a, b, c = (p[tri[:, k]] for k in range(3))
@@ -197,7 +198,7 @@ def test_glb_layout_and_position_bounds(tmp_path):
     chunk (space-padded) then the BIN chunk (zero-padded), both lengths multiples of 4, the
     buffer's byteLength within 3 bytes of the BIN chunk; POSITION's min/max are its data's
     (float32) extremes, every bufferView 4-byte aligned and inside the buffer."""
-    doc = G.write_gltf(tmp_path / "a.glb", Film(_map(), 1.33, 1.5), alpha=ALPHA)
+    doc = GF.write_gltf(tmp_path / "a.glb", Film(_map(), 1.33, 1.5), alpha=ALPHA)
     blob = (tmp_path / "a.glb").read_bytes()
     u32 = lambda at: int.from_bytes(blob[at:at + 4], "little")  # noqa: E731
     assert blob[:4] == b"glTF" and u32(4) == 2 and u32(8) == len(blob)
@@ -251,14 +252,14 @@ def test_dispersive_film_is_written_at_a_stated_wavelength(tmp_path):
     from thinfilm_jax import refractive_index
 
     water, tio2 = refractive_index("water"), refractive_index("TiO2")
-    doc = G.write_gltf(tmp_path / "soap.gltf", Film(_map(), water, 1.5), alpha=ALPHA)
+    doc = GF.write_gltf(tmp_path / "soap.gltf", Film(_map(), water, 1.5), alpha=ALPHA)
     material = doc["materials"][0]
     n550 = float(np.real(water(550.0)))
     assert material["extensions"][G.EXTENSION]["iridescenceIor"] == n550
     record = material["extras"]["thinfilm_jax"]
     assert record["index_wavelength_nm"] == 550.0
     assert record["dispersive_indices"]["eta_film"] == {"name": "water", "n": n550, "k": 0.0}
-    film, _ = G.read_gltf(tmp_path / "soap.gltf")
+    film, _ = GF.read_gltf(tmp_path / "soap.gltf")
     assert film.eta_film == n550 and film.eta_base == 1.5
     # another wavelength, another constant index; TiO₂'s κ ≈ 1e-5 at 450 nm is recorded
     m450 = G.film_to_gltf(Film(300.0, tio2, 1.5), wavelength_nm=450.0)
@@ -317,7 +318,7 @@ def test_fit_map_photo_gltf_asset_validates(validate, tmp_path):
     assert main(args) == 0
     (report,) = validate(tmp_path / "gltf" / "fit_map.gltf")
     assert _problems(report) == [] and report["info"]["hasDefaultScene"]
-    material = G.load_gltf(tmp_path / "gltf" / "fit_map.gltf")["materials"][0]
+    material = GF.load_gltf(tmp_path / "gltf" / "fit_map.gltf")["materials"][0]
     assert material["extras"]["thinfilm_jax"]["index_wavelength_nm"] == 589.0
     n589 = float(np.real(refractive_index("water")(589.0)))
     assert material["extensions"][G.EXTENSION]["iridescenceIor"] == n589
@@ -325,7 +326,7 @@ def test_fit_map_photo_gltf_asset_validates(validate, tmp_path):
     summary = json.loads((tmp_path / "out" / "fit_photo.json").read_text())
     assert summary["gltf"]["unfitted_pixels_filled"] == 24
     fitted = np.load(tmp_path / "out" / "thickness.npy")
-    film, _ = G.read_gltf(tmp_path / "gltf" / "fit_map.gltf")
+    film, _ = GF.read_gltf(tmp_path / "gltf" / "fit_map.gltf")
     back = np.asarray(film.thickness)
     bound = (np.nanmax(fitted) - np.nanmin(fitted)) / 510
     assert np.isfinite(back).all()

@@ -16,6 +16,7 @@ import pytest
 
 import thinfilm_jax as tf
 from thinfilm_jax.interop import gltf as G
+from thinfilm_jax.interop import gltf_file as GF
 from thinfilm_jax.interop import openpbr as P
 
 EXT = "KHR_materials_iridescence"
@@ -125,7 +126,7 @@ def test_thickness_texture_round_trip(tmp_path, bits):
     d = 330.0 + 250.0 * np.sin(x / 5.0) * np.cos(y / 7.0)
     d[0, 0], d[-1, -1] = d.min() - 1.0, d.max() + 1.0  # extremes in known places
     film = tf.Film(d, 1.33, 1.5)
-    doc = G.write_gltf(tmp_path / "film.gltf", film, 0.9, bits=bits)
+    doc = GF.write_gltf(tmp_path / "film.gltf", film, 0.9, bits=bits)
     ext = json.loads((tmp_path / "film.gltf").read_text())["materials"][0]["extensions"][EXT]
     assert doc["materials"][0]["extensions"][EXT] == ext
     lo, hi = ext["iridescenceThicknessMinimum"], ext["iridescenceThicknessMaximum"]
@@ -142,11 +143,11 @@ def test_thickness_texture_round_trip(tmp_path, bits):
     assert err.max() <= bound * (1 + 1e-9), (err.max(), bound)
     assert err.max() > 0.9 * bound  # the quantisation is really b bits
     assert back[0, 0] == lo and back[-1, -1] == hi
-    got, factor = G.read_gltf(tmp_path / "film.gltf")
+    got, factor = GF.read_gltf(tmp_path / "film.gltf")
     np.testing.assert_allclose(got.thickness, back, rtol=0, atol=1e-9)
     assert tuple(got[1:]) == (1.33, 1.5, 0.0, 1.0) and factor == 0.9
     with pytest.raises(ValueError, match="no material"):
-        G.read_gltf(tmp_path / "film.gltf", material=3)
+        GF.read_gltf(tmp_path / "film.gltf", material=3)
 
 
 def test_thickness_texture_bad_input(tmp_path):

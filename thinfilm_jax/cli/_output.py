@@ -45,13 +45,14 @@ def save_thickness_png(path: Path, d: np.ndarray, title: str, ambiguous=None) ->
 def write_map_gltf(args, film, alpha) -> dict:
     """``--gltf DIR`` of ``fit-map`` (an image or a photograph): the fitted map `film.thickness`
     (H, W) as ``DIR/fit_map.gltf`` + ``.bin`` + ``_thickness.png``
-    (`interop.gltf.write_gltf`, roughness √α; a photograph fitted as a mirror, ``alpha``
+    (`interop.gltf_file.write_gltf`, roughness √α; a photograph fitted as a mirror, ``alpha``
     None, is written with α = 0). A dispersive index is written at ``--gltf-wavelength``.
     Pixels left unfitted (NaN: outside ``--mask``) take their nearest fitted pixel's
     thickness, since a texture has no holes; their count is in the returned summary."""
     from scipy.ndimage import distance_transform_edt
 
-    from ..interop.gltf import EXTENSION, EXTRAS, write_gltf
+    from ..interop.gltf import EXTENSION, EXTRAS
+    from ..interop.gltf_file import write_gltf
 
     d = np.asarray(film.thickness, float)
     holes = ~np.isfinite(d)

@@ -18,7 +18,7 @@ With ``--camera`` the image is a photograph instead: `thinfilm_jax.cli.fit_photo
 cameras, lights, reference regions; its own outputs).
 
 ``--gltf DIR`` also writes the map as a complete glTF 2.0 asset, a sphere carrying the film
-(`thinfilm_jax.interop.gltf.write_gltf`, SPEC §10): ``DIR/fit_map.gltf`` with its mesh in
+(`thinfilm_jax.interop.gltf_file.write_gltf`, SPEC §10): ``DIR/fit_map.gltf`` with its mesh in
 ``DIR/fit_map.bin`` and a material with `KHR_materials_iridescence` (η₂ as `iridescenceIor`,
 minimum and maximum covering the map, factor 1), `KHR_materials_ior` (η₃) and
 `roughnessFactor` √α, and the

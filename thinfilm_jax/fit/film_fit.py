@@ -195,11 +195,8 @@ def fit_film(observed, theta_o, *, alpha, initial: Film | Stack,
     Residuals r = (model − observed)/σ over all angles and bands; the model is
     `patch_model` (`patch.patch_one` vmapped over θ_o) with `method`'s forward model.
 
-    The first call in a process compiles (XLA) for the shapes, dtypes and options given:
-    tens of seconds on a small CPU (27–35 s measured on a 2-core machine), then each call
-    with the same shapes runs compiled. ``thinfilm_jax.enable_compilation_cache()`` keeps the
-    compilations on disk for later processes (the ``thinfilm-jax`` command and the notebooks
-    turn it on).
+    A process's first call compiles for its shapes, dtypes and options (27–35 s on a 2-core
+    CPU); ``thinfilm_jax.enable_compilation_cache()`` keeps that on disk for later processes.
 
     Args:
         observed: L_j, shape (n_angles, n_bands), as from
@@ -353,11 +350,8 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
     constant `Film`, the stack code (every index at each λ) of a `Stack` or a dispersive
     `Film`.
 
-    The first call in a process compiles (XLA) for the shapes, dtypes and options given:
-    tens of seconds on a small CPU (27–35 s measured on a 2-core machine), then each call
-    with the same shapes runs compiled. ``thinfilm_jax.enable_compilation_cache()`` keeps the
-    compilations on disk for later processes (the ``thinfilm-jax`` command and the notebooks
-    turn it on).
+    A process's first call compiles for its shapes, dtypes and options (27–35 s on a 2-core
+    CPU); ``thinfilm_jax.enable_compilation_cache()`` keeps that on disk for later processes.
 
     Args:
         observed: unpolarised reflectance, shape (n_angles, n_wl) (or (n_wl,) for one angle).

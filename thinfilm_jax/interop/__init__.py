@@ -28,11 +28,8 @@ from .gltf import (
     alpha_from_gltf,
     write_thickness_texture,
     read_thickness_texture,
-    uv_sphere,
-    write_gltf,
-    load_gltf,
-    read_gltf,
 )
+from .gltf_file import load_gltf, read_gltf, uv_sphere, write_gltf
 from .openpbr import film_from_openpbr, film_to_openpbr
 
 # Left to their modules (glTF's and OpenPBR's DEFAULTS differ):

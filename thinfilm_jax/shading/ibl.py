@@ -98,11 +98,8 @@ def envmap_radiance(film, alpha, normal, view, envmap, *, method: str = "referen
                     sources: int | None = None, **kind_options) -> Array:
     """Band radiances L_j (..., J) of a film under an environment map (SPEC §9).
 
-    The first call in a process compiles (XLA) for the shapes, dtypes and options given:
-    tens of seconds on a small CPU (27–35 s measured on a 2-core machine), then each call
-    with the same shapes runs compiled. ``thinfilm_jax.enable_compilation_cache()`` keeps the
-    compilations on disk for later processes (the ``thinfilm-jax`` command and the notebooks
-    turn it on).
+    A process's first call compiles for its shapes, dtypes and options (27–35 s on a 2-core
+    CPU); ``thinfilm_jax.enable_compilation_cache()`` keeps that on disk for later processes.
 
     Args:
         film: the material, by type: a `Film` (fields broadcasting with the shading points)

@@ -105,11 +105,8 @@ def patch_radiance(film, theta_o, alpha=None, *, method: str = "reference",
                    lut: ShatLUT | None = None, batch_size: int = 64, **kind_options) -> Array:
     """Band radiances L_j of a patch under uniform light, shape broadcast(...) + (n_bands,).
 
-    The first call in a process compiles (XLA) for the shapes, dtypes and options given:
-    tens of seconds on a small CPU (27–35 s measured on a 2-core machine), then each call
-    with the same shapes runs compiled. ``thinfilm_jax.enable_compilation_cache()`` keeps the
-    compilations on disk for later processes (the ``thinfilm-jax`` command and the notebooks
-    turn it on).
+    A process's first call compiles for its shapes, dtypes and options (27–35 s on a 2-core
+    CPU); ``thinfilm_jax.enable_compilation_cache()`` keeps that on disk for later processes.
 
     Args:
         film: the material, by type: a `Film` (fields broadcast with theta_o and alpha) or a

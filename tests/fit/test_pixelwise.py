@@ -128,3 +128,23 @@ def test_one_result_type():
     s = res.summary()
     assert "exposure" not in s and s["pixels_fitted"] == D.size == res.n_pixels
     assert s["pixels_ambiguous"] == 0 and s["chi2_p50_p99"][1] < 1e-12
+
+
+def test_refine_pulls_a_pixel_toward_its_neighbours_as_the_prior_weighs():
+    """Stage 3's solve with the prior's residuals, on a linear pixel model with one residual
+    (d − a)/s and neighbours at b: it minimises ((d − a)/s)² + Σ_q ((d − b)/τ)² over the
+    neighbours present, whose minimum is the precision-weighted mean
+    d* = (a/s² + n b/τ²)/(1/s² + n/τ²) (closed form), n = 4 and n = 2 (two neighbours off
+    the map), and d = a with none (the prior's residuals are zero where `ok` is False)."""
+    a, b, s, tau = 500.0, 520.0, 4.0, 10.0
+    lo, hi = jnp.asarray([0.0]), jnp.asarray([1000.0])
+
+    def data(x):
+        return jnp.atleast_1d((x[0] - a) / s)
+
+    q = jnp.full(4, b)
+    for ok, n in (([True] * 4, 4), ([True, False, True, False], 2), ([False] * 4, 0)):
+        x, _, _ = PW.refine_pixel(data, jnp.asarray([a]), q, jnp.asarray(ok), tau, lo, hi,
+                                  steps=30)
+        want = (a / s**2 + n * b / tau**2) / (1 / s**2 + n / tau**2)
+        np.testing.assert_allclose(float(x[0]), want, atol=1e-6)

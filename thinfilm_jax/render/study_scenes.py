@@ -17,7 +17,7 @@ Scenes (SPEC §9):
 Camera: orthographic, looking horizontally-down (15°) at a unit sphere, its azimuth chosen
 so that the brightest texel of the map is reflected off-centre (deterministic). Behind the
 sphere the map itself is shown (linear RGB). Every method shades the same pixels
-(`FILM_MAP_METHODS`; default columns `DEFAULT_METHODS`): reference (texel-space quadrature,
+(`envmap_methods()`; default columns `DEFAULT_METHODS`): reference (texel-space quadrature,
 float64), mc (Monte Carlo), and the real-time ideal, filtered and improved (prefiltered map,
 float64 here; the float32 frame timings are in the benchmark). ideal and filtered read the map as it is (the
 published methods); improved reads it with its suns split off and shaded apart
@@ -75,7 +75,6 @@ from ..shading.colour_table import colour_table_radiance, prefilter_colour
 __all__ = [
     "PAINT_TABLE",
     "PAINT_METHODS",
-    "FILM_MAP_METHODS",
     "envmap_methods",
     "DEFAULT_METHODS",
     "RenderConfig",
@@ -104,17 +103,16 @@ PAINT_TABLE = dict(resolution=(8, 16), n_view=8, n_azimuth=4)
 SCENES = ("fig4", "fig3", "varying")  # the default scenes (films)
 ALL_SCENES = SCENES + ("carpaint",)
 PAINT_METHODS = ("reference", "colour_table")  # the columns of the car-paint scene
-# every `envmap_radiance` method of the registry (core/methods.py) that shades a film varying
-# per pixel; "colour_table" tabulates one homogeneous material (the car-paint scene's column)
-FILM_MAP_METHODS = tuple(m for m in method_names("envmap") if m != "colour_table")
+DEFAULT_METHODS = ("reference", "ideal", "filtered", "improved")
 
 
 def envmap_methods() -> tuple[str, ...]:
-    """`FILM_MAP_METHODS` as the registry holds them now (a method registered at run time included):
-    every `envmap_radiance` method that shades a film varying per pixel."""
+    """Every `envmap_radiance` method of the registry (core/methods.py) that shades a film
+    varying per pixel, as the registry holds them when called (a method registered at run time
+    included): those reading a map or its prefiltered form; "colour_table" tabulates one
+    homogeneous material (the car-paint scene's column)."""
     return tuple(m for m in method_names("envmap")
                  if implementation(m).envmap_kind in ("realtime", "exact"))
-DEFAULT_METHODS = ("reference", "ideal", "filtered", "improved")
 
 
 @dataclass(frozen=True)

@@ -240,6 +240,13 @@ def test_float32_rounding_at_the_ends_is_clamped_not_rejected():
      ValueError, "quadrature"),
     (lambda: tf.patch_radiance(FILM, 0.3, 0.3, options=(2, "exact")), TypeError, "ModelOptions"),
     (lambda: tf.patch_radiance(FILM, 0.3, 0.3, batch_size=0), ValueError, "batch_size"),
+    # the materials' exact map paths share one rule (`ibl_reference.exact_rule`): a zero
+    # batch was clamped to 1 silently on the classic-lobe path (and lists of numbers for
+    # the directions were refused there with a dtype error)
+    (lambda: tf.envmap_radiance(tf.Material(tf.ggx_lobe(0.3), tf.schlick_fresnel(0.04),
+                                            tf.no_diffuse()), None, [0.0, 0.0, 1.0],
+                                [0.0, 0.0, 1.0], np.ones((4, 8, 3)), batch_size=0),
+     ValueError, "batch_size"),
     (lambda: tf.patch_radiance(FILM, 0.3, 0.3, method="ideal",
                                options=tf.ModelOptions(terms=np.int64(-1))),
      ValueError, "terms"),

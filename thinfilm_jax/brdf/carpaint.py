@@ -141,10 +141,11 @@ class CarPaint(NamedTuple):
 # ----------------------------------------------------------------------------- checks
 def _leaf_dtype(*xs):
     """The widest floating dtype among the array arguments (Python numbers and integer arrays
-    adapt; none: the default float), promoted outside JAX's strict mode."""
+    adapt; none: the default float), promoted outside JAX's strict mode and canonicalised
+    (float64 host arrays give float32 unless 64-bit JAX is enabled, without a warning)."""
     dts = [np.dtype(x.dtype) for x in xs if hasattr(x, "dtype")]
     dts = [d for d in dts if np.issubdtype(d, np.floating)]
-    return np.result_type(*dts) if dts else jnp.result_type(float)
+    return jax.dtypes.canonicalize_dtype(np.result_type(*dts) if dts else jnp.result_type(float))
 
 
 def check_paint(paint) -> CarPaint:
@@ -202,8 +203,7 @@ def _directions(paint, wi, wo, n):
 
 
 # ----------------------------------------------------------------------------- coat
-def _dot(a, b):
-    return jnp.sum(a * b, axis=-1)
+_dot = _ndf.dot
 
 
 def _cos_inside(c, eta):
@@ -272,10 +272,7 @@ def _frame(paint, wi, wo, n):
     cto, fo = _coat(cos_, eta)
     wi_in = wi / eta + (cti - cis / eta)[..., None] * n
     wo_in = wo / eta + (cto - cos_ / eta)[..., None] * n
-    hs = wi_in + wo_in
-    h2 = _dot(hs, hs)
-    ok = up & (h2 > 0)
-    h = hs / jnp.sqrt(jnp.where(ok, h2, 1))[..., None]
+    h, ok = _ndf.half_vector(wi_in, wo_in, up)
     nh = jnp.where(ok, _ndf.clamp01(_dot(n, h)), 1)
     dh = jnp.where(ok, _ndf.clamp01(_dot(wi_in, h)), 1)
     th = jnp.where(ok, _angle(n, jnp.where(ok[..., None], h, n)), 0)

@@ -282,8 +282,7 @@ def ashikhmin_shirley_diffuse(albedo) -> Diffuse:
 
 
 # ----------------------------------------------------------------------------- evaluation
-def _dot(a, b):
-    return jnp.sum(a * b, axis=-1)
+_dot = _ndf.dot
 
 
 def _fresnel_bands(f: Fresnel, c, dtype):
@@ -356,10 +355,7 @@ def _brdf(material: Material, wi, wo, n, t):
     dtype = wi.dtype
     ci, co = _dot(wi, n), _dot(wo, n)
     up = (ci > 0) & (co > 0)
-    hs = wi + wo
-    h2 = _dot(hs, hs)
-    ok = up & (h2 > 0)
-    h = hs / jnp.sqrt(jnp.where(ok, h2, 1))[..., None]
+    h, ok = _ndf.half_vector(wi, wo, up)
     nh = jnp.where(ok, _ndf.clamp01(_dot(n, h)), 1)
     oh = jnp.where(ok, _ndf.clamp01(_dot(wo, h)), 1)
     cis, cos_ = jnp.where(up, _ndf.clamp01(ci), 1), jnp.where(up, _ndf.clamp01(co), 1)

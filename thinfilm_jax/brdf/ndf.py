@@ -73,6 +73,20 @@ def clamp01(x):
     return jnp.where(x >= 0, jnp.where(x <= 1, x, 1), 0)
 
 
+def dot(a, b):
+    """⟨a, b⟩ over the last axis."""
+    return jnp.sum(a * b, axis=-1)
+
+
+def half_vector(a, b, up):
+    """h = (a + b)/|a + b| and where it exists (`up` and a + b ≠ 0); elsewhere h is a + b
+    (finite, unused: callers mask with the returned flag, the double-where pattern)."""
+    hs = a + b
+    h2 = dot(hs, hs)
+    ok = up & (h2 > 0)
+    return hs / jnp.sqrt(jnp.where(ok, h2, 1))[..., None], ok
+
+
 def exp_cut(dtype):
     """Exponent above which exp(−x) underflows to 0 in `dtype`."""
     return float(-np.log(np.finfo(dtype).tiny)) * 0.99

@@ -61,10 +61,9 @@ import numpy as np
 from ..brdf import carpaint as C
 from ..brdf import ndf as _ndf
 from ..core import _validate as V
-from ..core.methods import implementation
 from .envmap import EnvMap, load_envmap, lookup_nearest
-from .ibl_integrand import _local_frame, texel_nodes
-from .ibl_reference import auto_subdivisions
+from .ibl_integrand import _local_frame
+from .ibl_reference import exact_rule
 
 __all__ = ["paint_patch_radiance", "paint_envmap_radiance", "PAINT_ENVMAP_METHODS"]
 
@@ -258,22 +257,13 @@ def paint_envmap_radiance(paint: C.CarPaint, normal, view, envmap, *, method: st
     normal = jnp.broadcast_to(jnp.asarray(normal, dt), shape + (3,))
     view = jnp.broadcast_to(jnp.asarray(view, dt), shape + (3,))
     rad = env.radiance.astype(dt)
-    h, w = env.shape
-    n_pts = int(np.prod(shape))
-    mc = implementation(method).monte_carlo
-    if not mc:
-        alpha = paint.lobe_alpha if paint.lobe_alpha.shape[0] else 1.0
-        s = auto_subdivisions(h, alpha) if subdivisions is None \
-            else V.check_int("subdivisions", subdivisions, 1)
-        d, wt, idx = texel_nodes(h, w, s)
-        extra = (jnp.asarray(d, dt), jnp.asarray(wt, dt)[:, None] * rad.reshape(-1, 3)[idx])
-        per_point, n_samples = len(wt), 0
-    else:
-        n_samples = V.check_int("n_samples", n_samples, 2)
-        extra = jax.random.key(0) if key is None else key
-        per_point = n_samples * (paint.lobe_alpha.shape[0] + 1)
-    if batch_size is None:
-        batch_size = max(1, 2**19 // max(per_point, 1))
-    batch = int(max(1, min(V.check_int("batch_size", batch_size, 1), max(n_pts, 1))))
+
+    def lobe_width():  # the sharpest lobe sets the reference's sub-texel nodes
+        return paint.lobe_alpha if paint.lobe_alpha.shape[0] else 1.0
+
+    mc, extra, n_samples, batch = exact_rule(
+        method, rad, lobe_width, int(np.prod(shape)), subdivisions=subdivisions,
+        n_samples=n_samples, key=key, batch_size=batch_size,
+        lobes=paint.lobe_alpha.shape[0] + 1)
     out, err = _ibl_jit(_cast(paint, dt), normal, view, rad, extra, (mc, batch, n_samples))
     return (out, err) if return_stderr else out

@@ -171,6 +171,38 @@ def _batch(batch_size, n_pts, per_point):
     return int(max(1, min(batch_size, max(n_pts, 1))))
 
 
+def texel_light(radiance, s: int, dtype):
+    """The piecewise-constant map as point lights: the `texel_nodes` directions (N, 3) and
+    each node's weight (sr) times its texel's radiance (N, 3), in `dtype` (the exact rule's
+    light; N = H·W·s²)."""
+    h, w = radiance.shape[:2]
+    d, wt, idx = texel_nodes(h, w, s)
+    return jnp.asarray(d, dtype), jnp.asarray(wt, dtype)[:, None] * radiance.reshape(-1, 3)[idx]
+
+
+def exact_rule(method: str, radiance, alpha, n_pts: int, *, subdivisions, n_samples, key,
+               batch_size, lobes: int = 1):
+    """The light a material's exact map path integrates (`material_ibl`, `carpaint_ibl`):
+    (monte_carlo, light, n_samples, batch). The `method` object says which rule: texel
+    quadrature (light = `texel_light` with `subdivisions`, None: `auto_subdivisions` of
+    ``alpha()``, a callable so that only this rule needs the lobe's width; n_samples 0) or
+    Monte Carlo (light = the PRNG key, default key 0; `lobes` sampled lobes a point). The
+    batch of shading points holds ≈ 2¹⁹ nodes or samples unless `batch_size` is given."""
+    mc = implementation(method).monte_carlo
+    if not mc:
+        s = auto_subdivisions(radiance.shape[0], alpha()) if subdivisions is None \
+            else V.check_int("subdivisions", subdivisions, 1)
+        light = texel_light(radiance, s, radiance.dtype)
+        per_point, n_samples = len(light[0]), 0
+    else:
+        n_samples = V.check_int("n_samples", n_samples, 2)
+        light = jax.random.key(0) if key is None else key
+        per_point = n_samples * lobes
+    if batch_size is not None:
+        batch_size = V.check_int("batch_size", batch_size, 1)
+    return mc, light, n_samples, _batch(batch_size, n_pts, per_point)
+
+
 # ----------------------------------------------------------------------------- entry points
 def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, cross_band,
                    arithmetic, one_film=False, subdivisions=None, n_cos=1024, n_samples=4096,
@@ -212,10 +244,9 @@ def exact_radiance(film, alpha, normal, view, env: EnvMap, *, method, observer, 
     _warn_unresolved_lobes(alpha, normal, view, np.pi / h / s)
     rad = env.radiance.astype(dtype)
     if exhaustive:
-        d, wt, idx = texel_nodes(*env.shape, s)
-        nodes = (jnp.asarray(d, dtype), jnp.asarray(wt, dtype)[:, None] * rad.reshape(-1, 3)[idx])
+        nodes = texel_light(rad, s, dtype)
         cfg = (False, observer, s, int(n_cos), bool(cross_band), arithmetic,
-               _batch(batch_size, n_pts, len(wt)), one_film)
+               _batch(batch_size, n_pts, len(nodes[0])), one_film)
         out = _exact_jit(film, alpha, normal, view, rad, nodes, cfg)
         return (out, jnp.zeros(alpha.shape, dtype)) if return_estimate else out
     out, est = adaptive_radiance(film, alpha, normal, view, rad, observer=observer, s=s,

@@ -56,14 +56,13 @@ import numpy as np
 
 from ..brdf import material as M
 from ..core import _validate as V
-from ..core.methods import implementation
 from ..optics.airy import choose_arithmetic
 from ..spectral.reflectance import spectral_bands
 from ..spectral.spectra import get_observer
 from ..spectral.uplift import cross_band_name
 from .envmap import EnvMap, load_envmap, lookup_nearest
-from .ibl_integrand import _interp, _local_frame, _r_table, texel_nodes
-from .ibl_reference import auto_subdivisions
+from .ibl_integrand import _interp, _local_frame, _r_table
+from .ibl_reference import exact_rule
 from .material_patch import diffuse_only
 
 __all__ = ["material_envmap_radiance", "MATERIAL_ENVMAP_METHODS", "effective_alpha"]
@@ -221,6 +220,7 @@ def material_envmap_radiance(material: M.Material, normal, view, envmap, *, tang
                                ("view", np.zeros(np.shape(view)[:-1]))]
                               + ([] if tangent is None else
                                  [("tangent", np.zeros(np.shape(tangent)[:-1]))]))
+    normal, view = (x if isinstance(x, jax.Array) else np.asarray(x) for x in (normal, view))
     dtype = jnp.result_type(normal, view, float)
     normal = jnp.broadcast_to(jnp.asarray(normal, dtype), shape + (3,))
     view = jnp.broadcast_to(jnp.asarray(view, dtype), shape + (3,))
@@ -233,22 +233,9 @@ def material_envmap_radiance(material: M.Material, normal, view, envmap, *, tang
     if n_cos is not None:
         n_cos = V.check_int("n_cos", n_cos, 2)
     rad = env.radiance.astype(dtype)
-    h, w = env.shape
-    n_pts = int(np.prod(shape))
-    mc = implementation(method).monte_carlo
-    if not mc:
-        s = auto_subdivisions(h, effective_alpha(material)) if subdivisions is None \
-            else V.check_int("subdivisions", subdivisions, 1)
-        d, wt, idx = texel_nodes(h, w, s)
-        extra = (jnp.asarray(d, dtype), jnp.asarray(wt, dtype)[:, None] * rad.reshape(-1, 3)[idx])
-        per_point, n_samples = len(wt), 0
-    else:
-        n_samples = V.check_int("n_samples", n_samples, 2)
-        extra = jax.random.key(0) if key is None else key
-        per_point = n_samples
-    if batch_size is None:
-        batch_size = max(1, 2**19 // max(per_point, 1))
-    batch = int(max(1, min(int(batch_size), max(n_pts, 1))))
+    mc, extra, n_samples, batch = exact_rule(
+        method, rad, lambda: effective_alpha(material), int(np.prod(shape)),
+        subdivisions=subdivisions, n_samples=n_samples, key=key, batch_size=batch_size)
     cfg = (mc, spectral, n_cos, obs, arithmetic, batch, n_samples)
     out, err = _ibl_jit(material, normal, view, tangent, rad, extra, cfg)
     return (out, err) if return_stderr else out

@@ -29,6 +29,7 @@ from thinfilm_jax.optics.opd import OPDMoments, cos_incidence_from_projection, o
 from thinfilm_jax.realtime.options import ModelOptions
 from thinfilm_jax.shading.patch import patch_radiance
 from thinfilm_jax.spectral.reflectance import rgb_reflectance
+from thinfilm_jax.core.methods import names as method_names
 from thinfilm_jax.optics.series import series_terms
 from thinfilm_jax.spectral.spectra import gaussian_fit_error, sensitivity_ft, shat_at_zero, shat_host
 from ._common import CIE, SB
@@ -56,8 +57,11 @@ from .stiff import (
     weights_range,
 )
 
-PATCH_METHODS = ("reference", "ideal", "filtered", "filtered_gt_moments", "filtered_gt_opd",
-                 "improved")
+#: the registry's methods of `patch_radiance` (a registered one joins the study), less those
+#: whose mirror limit is not BB17's film: glTF's own formula (its limits:
+#: tests/spectral/test_khr.py)
+OWN_FORMULA = ("khr",)
+PATCH_METHODS = tuple(m for m in method_names("patch") if m not in OWN_FORMULA)
 STABILITY_FUNCTIONS = (
     "airy_reflectance", "airy_reflectance[dielectric]", "rgb_reflectance[spectral]",
     "rgb_reflectance[spectral,cie_1931_2]", "rgb_reflectance[fourier,M=2]",

@@ -36,6 +36,10 @@ class Grey(ShadingMethod):
         n = get_observer(observer).n_bands
         return GREY * jnp.sum(quad.weight) * jnp.ones(n, quad.weight.dtype)
 
+    def rgb(self, film, cos_theta, observer, terms, shat, arithmetic, layer):
+        shape = jnp.broadcast_shapes(film.shape, jnp.shape(cos_theta))
+        return jnp.full(shape + (get_observer(observer).n_bands,), GREY)
+
     def map_light(self, film, alpha, normal, view, pref, cfg):
         cos_o = jnp.sum(normal * view, axis=-1)
         up = cos_o > 0
@@ -48,7 +52,7 @@ class Grey(ShadingMethod):
 
 @pytest.fixture
 def grey():
-    methods.register(methods.Method("grey", ("patch", "envmap"), False, "", False,
+    methods.register(methods.Method("grey", ("rgb", "patch", "envmap"), False, "", False,
                                     "a constant albedo (test)", impl=Grey()))
     try:
         yield
@@ -56,10 +60,17 @@ def grey():
         methods.unregister("grey")
 
 
-def test_grey_method_through_both_entry_points(grey):
+def test_grey_method_through_the_entry_points(grey):
     assert "grey" in methods.names("patch") and "grey" in methods.names("envmap", exact=False)
-    assert "grey" not in methods.names("envmap", exact=True)
+    assert "grey" not in methods.names("envmap", exact=True) and "grey" in methods.names("rgb")
+    # the public constants read the registry at each use (not frozen at import)
+    assert all("grey" in c for c in (tf.spectral.RGB_METHODS, tf.PATCH_METHODS,
+                                     tf.ENVMAP_METHODS))
     film = tf.Film(np.array([0.0, 350.0]), 1.33, 1.5)
+    # rgb_reflectance calls the row's object too (R_j ≡ g at every cosine)
+    np.testing.assert_array_equal(tf.rgb_reflectance(film,
+                                                     np.array([[1.0], [0.3]]), method="grey"),
+                                  np.full((2, 2, 3), GREY))
     theta = np.array([0.2, 1.1])
     got = tf.patch_radiance(film, theta, 0.3, method="grey",
                             options=tf.ModelOptions(quadrature=QUAD))

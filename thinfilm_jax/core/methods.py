@@ -5,8 +5,8 @@ Every entry point that takes ``method=`` (`rgb_reflectance`, `patch_radiance`,
 `require` turns a material the method cannot model into a `ValueError` that names the method
 and what it lacks (SPEC §12). The registry is executable: a row's ``impl`` is the method
 object (or the ``"module:attribute"`` path of it, imported on first use, since the shading
-methods live in higher layers) that `shading.patch.patch_radiance` and
-`shading.ibl.envmap_radiance` call (`implementation`). Adding a method is one module and one
+methods live in higher layers) that `spectral.reflectance.rgb_reflectance`,
+`shading.patch.patch_radiance` and `shading.ibl.envmap_radiance` call (`implementation`). Adding a method is one module and one
 row (docs/how-to/new-method.md); `register` and `unregister` add and remove a row at run time.
 `material_path` is the one place that decides how a method reads a material: the one-film
 code, the stack code, or a dispersive film at each band's centroid.
@@ -43,6 +43,7 @@ Example:
 from __future__ import annotations
 
 import importlib
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 from .material import is_dispersive, needs_stack
@@ -52,6 +53,7 @@ __all__ = [
     "Method",
     "METHODS",
     "names",
+    "MethodNames",
     "implementation",
     "register",
     "unregister",
@@ -69,16 +71,19 @@ class Method(NamedTuple):
     dispersion: str  # "exact" | "bands" | ""
     stacks: bool
     summary: str
-    #: the method object (`shading.methods.ShadingMethod`), or its "module:attribute" path
-    #: (relative to the package); None for the methods of `rgb_reflectance` only
+    #: the method object (`shading.methods.ShadingMethod`, or `spectral.reflectance.
+    #: BandMethod` for a method of `rgb_reflectance` only), or its "module:attribute" path
+    #: (relative to the package)
     impl: Any = None
 
 
 _ROWS = (
     Method("spectral", ("rgb",), True, "exact", True,
-           "the exact bands: the Airy (or stack) reflectance integrated over the observer's λ"),
+           "the exact bands: the Airy (or stack) reflectance integrated over the observer's λ",
+           impl="spectral.reflectance:SPECTRAL"),
     Method("fourier", ("rgb",), False, "bands", False,
-           "BB17's Fourier-domain sum after M orders (K 4)"),
+           "BB17's Fourier-domain sum after M orders (K 4)",
+           impl="spectral.reflectance:FOURIER"),
     Method("reference", ("patch", "envmap"), True, "exact", True,
            "converged quadrature of the exact spectral reflectance",
            impl="shading.methods.reference:REFERENCE"),
@@ -119,6 +124,45 @@ def names(where: str, *, exact: bool | None = None) -> tuple[str, ...]:
     ``exact=True`` / ``False`` keeps the exact / the approximate methods only."""
     return tuple(m.name for m in METHODS.values()
                  if where in m.where and (exact is None or m.exact == exact))
+
+
+class MethodNames(Sequence):
+    """The names `names(where, exact=...)` gives, read from the registry at each use: the
+    public constants that list an entry point's methods (`ENVMAP_METHODS`, `PATCH_METHODS`,
+    `RGB_METHODS`) include a method `register` adds after import. Compares equal to the
+    tuple of its names.
+
+    Example:
+        >>> MethodNames("rgb") == ("spectral", "fourier", "khr"), "khr" in MethodNames("rgb")
+        (True, True)
+    """
+
+    def __init__(self, where: str, *, exact: bool | None = None):
+        self._where, self._exact = where, exact
+
+    def _names(self) -> tuple[str, ...]:
+        return names(self._where, exact=self._exact)
+
+    def __getitem__(self, i):
+        return self._names()[i]
+
+    def __len__(self) -> int:
+        return len(self._names())
+
+    def __eq__(self, other) -> bool:
+        return self._names() == (tuple(other) if isinstance(other, Sequence) else other)
+
+    def __hash__(self) -> int:
+        return hash(self._names())
+
+    def __add__(self, other):
+        return self._names() + tuple(other)
+
+    def __radd__(self, other):
+        return tuple(other) + self._names()
+
+    def __repr__(self) -> str:
+        return repr(self._names())
 
 
 def implementation(method: str):

@@ -60,7 +60,7 @@ from ..brdf.material import Material
 from ..core import _validate as V
 from ..core.film import Film
 from ..core.methods import implementation, material_path
-from ..core.methods import names as method_names
+from ..core.methods import MethodNames
 from ..core.stack import Stack
 from ..optics.airy import choose_arithmetic
 from ..realtime.options import ModelOptions, check_options
@@ -84,7 +84,7 @@ __all__ = [
 ]
 
 #: the built-in methods, the registry's order (core/methods.py)
-ENVMAP_METHODS = method_names("envmap")
+ENVMAP_METHODS = MethodNames("envmap")
 REALTIME_OPTIONS = ModelOptions(shat="lut")  # the real-time default: Ŝ from the map's table
 HIGHEST = jax.lax.Precision.HIGHEST
 
@@ -173,7 +173,7 @@ def _film_envmap(film, alpha, normal, view, envmap, method, observer, kw, kind_o
     if alpha is None:
         raise TypeError("envmap_radiance of a Film or Stack needs alpha, the GGX roughness "
                         "α ∈ (0, 1]")
-    V.check_choice("method", method, method_names("envmap"))
+    V.check_choice("method", method, ENVMAP_METHODS)
     V.check_choice("observer", observer, OBSERVERS)
     path = material_path(film, method)
     if path == "stack":  # every index at each wavelength (`ideal`: an exact R_jk table)

@@ -56,7 +56,7 @@ from ..core import _validate as V
 from ..core.film import Film
 from ..core.material import batch_shape, needs_stack, point_split
 from ..core.methods import implementation, material_path
-from ..core.methods import names as method_names
+from ..core.methods import MethodNames
 from ..core.stack import Stack
 from ..optics.airy import choose_arithmetic
 from ..realtime.improved import BinTable
@@ -77,7 +77,7 @@ __all__ = [
 ]
 
 #: the built-in methods, the registry's order (core/methods.py)
-PATCH_METHODS = method_names("patch")
+PATCH_METHODS = MethodNames("patch")
 #: the methods of the material kinds that carry their own lobe (`Material`, `CarPaint`)
 PATCH_KIND_METHODS = {Material: ("reference",), CarPaint: ("reference",)}
 
@@ -92,7 +92,7 @@ def _check_patch_args(film, theta_o, alpha, method, observer, options):
         film = V.check_film(film)
     theta_o = V.check_angle("theta_o", theta_o)
     alpha = V.check_range("alpha", alpha, 0.0, 1.0, lo_open=True, why=" (GGX roughness)")
-    V.check_choice("method", method, method_names("patch"))
+    V.check_choice("method", method, PATCH_METHODS)
     V.check_choice("observer", observer, OBSERVERS)
     options = check_options(options)
     shape = V.check_broadcast([("film", np.zeros(batch_shape(film))), ("theta_o", theta_o),
@@ -153,7 +153,7 @@ def _film_patch(film, theta_o, alpha, method, kw, kind_options):
                         "α ∈ (0, 1]")
     observer, options, lut, batch_size = kw["observer"], kw["options"], kw["lut"], \
         kw["batch_size"]
-    V.check_choice("method", method, method_names("patch"))
+    V.check_choice("method", method, PATCH_METHODS)
     V.check_choice("observer", observer, OBSERVERS)
     path = material_path(film, method)
     if path == "bands":  # a dispersive single film at each band's centroid (SPEC §12)

@@ -25,11 +25,11 @@ import numpy as np
 from jax import Array
 
 from ..core import _validate as V
-from ..core.methods import names as method_names
+from ..core.methods import MethodNames
 from ..optics.airy import broadcast_all, choose_arithmetic, polarised_reflectance
 from ..core.film import Film
 from ..core.material import batch_shape, expand_batch
-from ..core.methods import material_path
+from ..core.methods import implementation, material_path
 from ..core.stack import Stack
 from ..optics.stack import stack_reflectance_traced
 from ..optics.fresnel import film_interfaces
@@ -51,7 +51,7 @@ __all__ = [
     "fourier_bands",
 ]
 
-RGB_METHODS = method_names("rgb")  # the registry's order (core/methods.py)
+RGB_METHODS = MethodNames("rgb")  # the registry's, read at each use (core/methods.py)
 LAYERS = ("auto", "film", "bare")
 
 
@@ -128,10 +128,10 @@ def rgb_reflectance(film: Film, cos_theta, *, observer: str = DEFAULT_OBSERVER,
     # any integer type (np.arange(...) elements too), not bool; a plain int for the jit cache
     terms = V.check_int("terms", terms, 0)
     V.check_broadcast([("film", jnp.zeros(film.shape)), ("cos_theta", cos_theta)])
-    return _RGB_METHODS[method](film, cos_theta, observer, terms, shat, arithmetic, layer)
+    return implementation(method).rgb(film, cos_theta, observer, terms, shat, arithmetic, layer)
 
 
-def _khr_rgb(film, cos_theta, observer, terms, shat, arithmetic, layer):
+def khr_rgb(film, cos_theta, observer, terms, shat, arithmetic, layer):
     """method="khr": glTF's fixed formula, its knobs checked to be at their defaults."""
     for name, value, default in (("observer", observer, DEFAULT_OBSERVER),
                                  ("terms", terms, 2), ("shat", shat, "exact")):
@@ -165,9 +165,23 @@ _BAND_FUNCTIONS = {
     "fourier": lambda film, c, observer, terms, shat, arithmetic: fourier_bands(
         film, c, observer, terms=terms, shat=shat, arithmetic=arithmetic),
 }
-#: `rgb_reflectance`'s methods (the registry's rows where "rgb"), by name
-_RGB_METHODS = {"spectral": _bands_rgb("spectral"), "fourier": _bands_rgb("fourier"),
-                "khr": _khr_rgb}
+
+
+class BandMethod:
+    """A method of `rgb_reflectance` only (a registry row's ``impl``, `core.methods`): its
+    ``rgb(film, cos_theta, observer, terms, shat, arithmetic, layer)`` gives the film's band
+    reflectances on validated inputs. A method of the shading entry points that is also
+    offered by `rgb_reflectance` has the same hook on its shading object (``khr``)."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.rgb = _bands_rgb(name)
+
+    def __repr__(self):
+        return f"<band method {self.name!r}>"
+
+
+SPECTRAL, FOURIER = BandMethod("spectral"), BandMethod("fourier")
 
 
 def band_centroids(observer=DEFAULT_OBSERVER) -> np.ndarray:

@@ -15,6 +15,7 @@ and batch; what differs between methods is asked of the method object:
 | ``map_points(film, α, n, ω_o, pref, cfg)`` | `ibl._realtime_points` | flat shading points → (P, J), sources included |
 | ``envmap_stack(...)`` | `envmap_radiance` | a `Stack` or dispersive film under a map (methods of exact dispersion) |
 | ``monte_carlo`` | the exact drivers | the sampled rule instead of the quadrature |
+| ``rgb(film, cos θ, observer, terms, shat, arithmetic, layer)`` | `rgb_reflectance` | the band reflectances at one cosine (a method whose row lists "rgb"; the methods of `rgb_reflectance` only are `spectral.reflectance.BandMethod`s) |
 
 Which of the film, stack and per-band paths a material takes is `core.methods.material_path`.
 The split-sum methods (`ideal`, `filtered`) share `SplitSum.map_light`, the read of

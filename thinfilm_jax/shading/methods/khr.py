@@ -18,6 +18,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ...spectral.khr import khr_bands, khr_to_bands
+from ...spectral.reflectance import khr_rgb
 from ..prefilter import lookup_albedo, lookup_radiance
 from ..sources import source_light
 from . import ShadingMethod
@@ -26,6 +27,7 @@ from . import ShadingMethod
 class KhrMethod(ShadingMethod):
     name = "khr"
     envmap_kind = "realtime"
+    rgb = staticmethod(khr_rgb)  # `rgb_reflectance(method="khr")`: linear Rec. 709, at h = n
 
     def patch_point(self, film, theta_o, alpha, quad, *, observer, options, lut, table):
         rgb = jnp.sum(quad.weight) * khr_bands(film, jnp.cos(theta_o))  # linear Rec. 709

@@ -1,6 +1,7 @@
 """The package's layout: docs/reference/layout.md names every module once (and nothing else),
-the layers import only earlier layers, no cycles, one version, no tracker references; the
-studies in `benchmarks/` (outside the package) are listed too and import only public names."""
+the layers import only earlier layers, no cycles, modules readable in one sitting (≤ 600 lines,
+functions ≤ 120), one version, no tracker references; the studies in `benchmarks/` (outside the
+package) are listed too and import only public names."""
 
 import re
 from pathlib import Path
@@ -210,3 +211,21 @@ def test_private_import_scan_sees_one(tmp_path):
                    "import numpy as _np\nfrom thinfilm_jax import Film\n")
     assert list(_private_imports(mod)) == ["thinfilm_jax.core._io",
                                            "thinfilm_jax.shading.ibl._r_table"]
+
+
+def test_modules_and_functions_read_in_one_sitting():
+    """No package module over 600 lines and no function over 120 (docs/reference/style.md);
+    `python -m benchmarks.house` lists the largest."""
+    import ast
+
+    long = []
+    for path in sorted((ROOT / "thinfilm_jax").rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        rel = path.relative_to(ROOT)
+        if len(text.splitlines()) > 600:
+            long.append(f"{rel}: {len(text.splitlines())} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) \
+                    and node.end_lineno - node.lineno + 1 > 120:
+                long.append(f"{rel}:{node.name}: {node.end_lineno - node.lineno + 1} lines")
+    assert not long, "\n".join(long)

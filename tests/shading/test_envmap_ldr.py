@@ -113,3 +113,18 @@ def test_render_cli_refuses_an_ldr_map_and_passes_ldr_srgb_on(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "not an equirectangular map" in err and "LDR" not in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_prefiltered_map_where_the_map_is_expected_is_named():
+    """`prefilter_colour` and the exact methods take the map itself; handed the prefiltered
+    one (a NamedTuple of tables) they said "setting an array element with a sequence"."""
+    import thinfilm_jax as tf
+
+    img = np.ones((8, 16, 3))
+    pref = tf.prefilter_envmap(img, levels=2, resolution=(8, 16), albedo_shape=(8, 5),
+                               sources=0)
+    with pytest.raises(TypeError, match="got a PrefilteredEnvMap: pass the map it was made"):
+        tf.prefilter_colour(pref, tf.Film(300.0, 1.33, 1.5), 0.3)
+    with pytest.raises(ValueError, match="pass an EnvMap, not a PrefilteredEnvMap"):
+        tf.envmap_radiance(tf.Film(300.0, 1.33, 1.5), 0.3, [0.0, 0.0, 1.0], [0.0, 0.0, 1.0],
+                           pref, method="reference")

@@ -121,6 +121,10 @@ def load_envmap(source, *, dtype=None, ldr_srgb: bool = False) -> EnvMap:
     """
     if isinstance(source, EnvMap):
         source = source.radiance
+    if isinstance(source, tuple) and hasattr(source, "_fields"):  # a prefiltered map, a table
+        raise TypeError(f"expected an environment map (an EnvMap, an (H, W, 3) array, a file "
+                        f"or a shipped name), got a {type(source).__name__}: pass the map it "
+                        "was made from")
     if isinstance(source, str) and source in SHIPPED:
         source = SHIPPED[source]
     if isinstance(source, (str, Path)):

@@ -7,10 +7,13 @@ base). Under a map: per channel, F_iridescence(cos θ_o) × (A · the prefiltere
 the split suns' Σ_s m_s L_s, the same Fresnel for every light as the renderer's punctual
 ones), then to the bands; `cross_band`, `options` and the map's Ŝ table do not apply.
 
-Example:
+Example: at d = 0 glTF's formula is its own, not the bare base (which `ideal` gives, the
+same in every band):
     >>> from thinfilm_jax import Film, patch_radiance
-    >>> patch_radiance(Film(600.0, 1.3, 2.0, 0.5), 0.3, 0.25, method="khr").shape
-    (3,)
+    >>> bare = Film(0.0, 1.3, 2.0, 0.5)
+    >>> k, i = (patch_radiance(bare, 0.3, 0.25, method=m) for m in ("khr", "ideal"))
+    >>> [round(float(x), 3) for x in k], [round(float(x), 3) for x in i]
+    ([0.129, 0.121, 0.119], [0.123, 0.123, 0.123])
 """
 
 from __future__ import annotations

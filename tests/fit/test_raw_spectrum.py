@@ -76,6 +76,37 @@ def test_synthetic_raw_spectrum_recovered(d):
     assert "envelope" in res.to_dict()
 
 
+def test_second_raw_fit_of_the_same_shapes_neither_traces_nor_compiles():
+    """A second spectrum of the same length (other data, same options) reuses the compiled
+    fit: no jaxpr is traced and XLA compiles nothing (`jax.monitoring`'s trace and compile
+    events; a data-dependent Python value among the jit's static arguments would retrace
+    every spectrum, about 25 s on a 2-core CPU)."""
+    import jax.monitoring as monitoring
+
+    events = ("/jax/core/compile/jaxpr_trace_duration",
+              "/jax/core/compile/backend_compile_duration")
+    seen = []
+
+    def listen(event, seconds, **_):
+        if event in events:
+            seen.append(event)
+
+    def fit(seed):
+        obs, _, _, _ = raw_signal(3000.0, seed=seed)
+        res = tf.fit_spectrum(obs, LAM, 1.0, initial=tf.Film(1000.0, N_SOAP, 1.0),
+                              envelope=2, options=BOX)
+        return float(jax.block_until_ready(res.film.thickness))
+
+    d0 = fit(3)  # (compiled here, or by the tests above: the same shapes and options)
+    monitoring.register_event_duration_secs_listener(listen)
+    try:
+        d1 = fit(4)
+    finally:
+        monitoring.unregister_event_duration_listener(listen)
+    assert seen == []
+    assert abs(d0 - 3000.0) < MARGIN_NM[3000.0] and abs(d1 - 3000.0) < MARGIN_NM[3000.0]
+
+
 def test_thin_film_under_a_quadratic_lamp_is_honestly_uncertain():
     """150 nm under a quadratic lamp fitted with k = 2: the film's one broad fringe trades
     with the lamp's curvature; the standard error says so (7–60 nm over three noise seeds,

@@ -39,9 +39,10 @@ $G\hat u = B^T b$, differentiating gives
 $G\,d\hat u = B^T(db - dB\,\hat u) - dB^T(B\hat u - b)$ and
 $d(B\hat u - b) = dB\,\hat u + B\,d\hat u - db$: two triangular solves with $R$ and four
 products with $n \times m$ matrices. It is the derivative of the same ridge solution that
-AD through the QR would give (they agree to rounding), at a twentieth of the cost: JAX's
-QR derivative rule costs ≈ 50 residual evaluations on a 1161 × 6 design, and the
-Levenberg–Marquardt steps of the search take a Jacobian after every accepted step.
+AD through the QR gives (they agree to rounding), 13 times cheaper: on a 1161 × 6 design
+(2-core CPU) 0.4 ms against 5.4 ms for JAX's QR derivative rule, ≈ 50 residual
+evaluations, and the Levenberg–Marquardt steps of the search take a Jacobian after every
+accepted step (a raw fit of 1161 wavelengths: 0.23 s warm, from 0.7–3 s).
 
 **Standard errors.** $\operatorname{cov}(x) = s^2 (J_{VP}^T J_{VP})^{-1}$ with $J_{VP}$ the
 Jacobian of the projected residual. At the optimum $J_{VP}^T J_{VP}$ equals, up to terms of

@@ -32,8 +32,16 @@ data say the label is, in units of the fit's noise), the thickness implied by ea
 consecutive extrema of the smoothed, reference-divided spectrum, d = 1/(4n(1/λ_a − 1/λ_b))
 (its median and spread), the neighbours in time, and optifik's FFT and min-max (RANSAC)
 estimates with the settings of its own tests (λ ≥ 450 nm; smoothed by its Savitzky–Golay
-filter for min-max, prominence 0.02, distance 10), Scheludko order 0 with the void for
-victor2.
+filter for min-max, prominence 0.02, distance 10; its RANSAC draws from NumPy's global
+RNG, seeded with `OPTIFIK_SEED` for each call), Scheludko order 0 with the void for victor2.
+
+**Timing** (SPEC §14: a raw fit in ≤ 1 s warm): one `fit_spectrum(..., envelope=2)` on a
+victor2 spectrum as the spectrometer gave it (no void subtracted), 400–800 nm (1252
+wavelengths), its Cauchy index, thickness in [0, 5000] nm, σ estimated (two searches of the
+whole box): a first call on T14143 (the compile, from `jax.monitoring`'s backend-compile
+events: zero where the persistent cache held the program), then the median of 5 calls on
+T14211, with the 1-min load average. ``python -m benchmarks.raw_spectra --timing`` runs and
+prints this row alone (no compilation cache, no files written).
 
 Example (the thickness a pair of consecutive extrema implies):
     >>> round(extrema_pair_thickness(600.0, 650.0, 1.33), 1)
@@ -63,6 +71,15 @@ SETS = ("manue_sample3", "victor2_order0")
 MANUE_BAND, MANUE_K, MANUE_VARIANTS = (450.0, 900.0), 1, (0, 2)
 VICTOR_BANDS, VICTOR_K = ((400.0, 800.0), (450.0, 800.0)), 1
 THICKNESS_BOX = (0.0, 5000.0)
+#: victor2's index as its labels used: n(λ) = A + B/λ², B in µm² (3102.06 nm²)
+VICTOR_CAUCHY = (1.324188, 3102.060378e-6)
+#: the timing row (module docstring): envelope degree, band, spectra (warm-up, timed), calls
+TIMING_K, TIMING_BAND, TIMING_FILES, TIMING_REPEATS = 2, (400.0, 800.0), ("T14143.xy",
+                                                                          "T14211.xy"), 5
+#: NumPy's global seed for each optifik estimator (its min-max RANSAC is random)
+OPTIFIK_SEED = 0
+#: the `jax.monitoring` event of one XLA compile (its duration in seconds)
+COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"
 #: the manue variants run on every this-many-th spectrum (their cost: three fits each)
 VARIANT_STEP = 4
 TARGET_WITHIN, TARGET_MEDIAN = 0.95, 0.02
@@ -123,6 +140,8 @@ def _optifik(lam, raw, n_lam, void=None):
             lam, smooth_intensities(raw), refractive_index=n, interference_order=0,
             intensities_void=void[m]).thickness}
     for k, fn in calls.items():
+        state = np.random.get_state()  # min-max's RANSAC draws from NumPy's global RNG:
+        np.random.seed(OPTIFIK_SEED)  # seeded, so that the study is reproducible
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -130,6 +149,8 @@ def _optifik(lam, raw, n_lam, void=None):
             out[k] = v if math.isfinite(v) else None
         except (RuntimeError, ValueError, TypeError, IndexError):  # optifik's refusals
             out[k] = None
+        finally:
+            np.random.set_state(state)
     return out
 
 
@@ -223,7 +244,7 @@ def victor(verbose: bool = True) -> dict:
     """The victor2_order0 part (module docstring)."""
     folder = data_dir() / "victor2_order0"
     labels = _labels(folder)
-    eta = cauchy(1.324188, 3102.060378e-6)  # n = A + B/λ², B in µm² (3102.06 nm²)
+    eta = cauchy(*VICTOR_CAUCHY)
 
     def n_of(lam):
         return 1.324188 + 3102.060378 / np.asarray(lam) ** 2
@@ -261,6 +282,66 @@ def victor(verbose: bool = True) -> dict:
     out["optifik"] = {"scheludko0": _summary([r["optifik_ratio"]["scheludko0"]
                                               for r in first])}
     return out
+
+
+def fit_timing(verbose: bool = True, repeats: int = TIMING_REPEATS) -> dict:
+    """Warm and compile time of one raw fit (module docstring, "Timing")."""
+    import os
+
+    import jax
+    import jax.monitoring as monitoring
+
+    folder = data_dir() / "victor2_order0"
+    lo, hi = TIMING_BAND
+    spectra = []
+    for fn in TIMING_FILES:
+        lam, raw = read_spectrum(folder / fn)
+        m = (lam >= lo) & (lam <= hi)
+        spectra.append((lam[m], raw[m]))
+    opts = FitOptions(bounds={"thickness": THICKNESS_BOX})
+    initial = Film(1000.0, cauchy(*VICTOR_CAUCHY), 1.0)
+
+    def call(lam, obs):
+        t0 = time.perf_counter()
+        res = jax.block_until_ready(fit_spectrum(obs, lam, 1.0, initial=initial,
+                                                 envelope=TIMING_K, options=opts))
+        return time.perf_counter() - t0, float(res.film.thickness)
+
+    compiled = []
+
+    def listen(event, seconds, **_):
+        if event == COMPILE_EVENT:
+            compiled.append(seconds)
+
+    load_before = list(os.getloadavg())
+    monitoring.register_event_duration_secs_listener(listen)
+    try:
+        first, _ = call(*spectra[0])
+        n_first = len(compiled)
+        warm = [call(*spectra[1]) for _ in range(max(repeats, 1))]
+    finally:
+        monitoring.unregister_event_duration_listener(listen)
+    out = {"files": list(TIMING_FILES), "n_wavelengths": int(spectra[1][0].size),
+           "band_nm": [lo, hi], "k": TIMING_K, "first_s": first,
+           "compile_s": float(sum(compiled[:n_first])),
+           "recompiles_warm": len(compiled) - n_first,
+           "warm_s": [t for t, _ in warm],
+           "warm_median_s": float(np.median([t for t, _ in warm])),
+           "thickness": warm[-1][1], "load_before": load_before,
+           "load_after": list(os.getloadavg())}
+    log(timing_line(out), verbose)
+    return out
+
+
+def timing_line(t: dict) -> str:
+    """The timing row in words."""
+    return (f"one raw fit (envelope={t['k']}, {t['files'][1]}, {t['band_nm'][0]:g}–"
+            f"{t['band_nm'][1]:g} nm, {t['n_wavelengths']} wavelengths, σ estimated): warm "
+            f"median {t['warm_median_s']:.3f} s of {len(t['warm_s'])} (min "
+            f"{min(t['warm_s']):.3f}, max {max(t['warm_s']):.3f}); first call "
+            f"({t['files'][0]}) {t['first_s']:.1f} s, of which XLA compile "
+            f"{t['compile_s']:.1f} s; {t['recompiles_warm']} recompiles when warm; 1-min "
+            f"load average {t['load_before'][0]:.2f} before, {t['load_after'][0]:.2f} after")
 
 
 def _summary(ratios) -> dict:
@@ -303,7 +384,9 @@ def run(out="figures", *, quick: bool = False, verbose: bool = True) -> dict:
     enable_compilation_cache()
     if not data_dir().is_dir():
         raise SystemExit(f"raw_spectra: {data_dir()} is absent (the optifik spectra)")
-    result = {"environment": environment(), "manue_sample3": manue(verbose, 4 if quick else 1),
+    timing = fit_timing(verbose)  # first: its compile is not shared with the fits below
+    result = {"environment": environment(), "timing": timing,
+              "manue_sample3": manue(verbose, 4 if quick else 1),
               "victor2_order0": victor(verbose), "known_to_fail": KNOWN_TO_FAIL,
               "targets": {"within_10pct": TARGET_WITHIN, "median_abs_rel": TARGET_MEDIAN}}
     ma = result["manue_sample3"]["summary"]
@@ -349,6 +432,7 @@ def markdown(res: dict) -> str:
     lines += ["", f"Warm time per fit (two passes, σ estimated): manue median "
               f"{ma['warm_seconds']['median']:.3f} s (max {ma['warm_seconds']['max']:.3f} s); "
               f"victor2 median {vi['bands']['400-800']['warm_seconds']['median']:.3f} s.", "",
+              "Timing (SPEC §14, ≤ 1 s warm): " + timing_line(res["timing"]) + ".", "",
               "## manue_sample3 per spectrum", "",
               "Δχ²(label): how much worse the label's thickness fits (envelope re-projected), "
               "in units of the fit's noise; extrema d: the thickness implied by consecutive "
@@ -388,7 +472,17 @@ def main(argv=None) -> int:
                                 description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="figures")
     p.add_argument("--quick", action="store_true", help="every fourth manue spectrum")
+    p.add_argument("--timing", action="store_true",
+                   help="only the timing row, printed (no compilation cache, no files)")
     a = p.parse_args(argv)
+    if a.timing:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+        if not data_dir().is_dir():
+            raise SystemExit(f"raw_spectra: {data_dir()} is absent (the optifik spectra)")
+        print(timing_line(fit_timing(verbose=False)))
+        return 0
     run(a.out, quick=a.quick)
     return 0
 

@@ -76,6 +76,37 @@ def test_synthetic_raw_spectrum_recovered(d):
     assert "envelope" in res.to_dict()
 
 
+def test_second_raw_fit_of_the_same_shapes_neither_traces_nor_compiles():
+    """A second spectrum of the same length (other data, same options) reuses the compiled
+    fit: no jaxpr is traced and XLA compiles nothing (`jax.monitoring`'s trace and compile
+    events; a data-dependent Python value among the jit's static arguments would retrace
+    every spectrum, about 25 s on a 2-core CPU)."""
+    import jax.monitoring as monitoring
+
+    events = ("/jax/core/compile/jaxpr_trace_duration",
+              "/jax/core/compile/backend_compile_duration")
+    seen = []
+
+    def listen(event, seconds, **_):
+        if event in events:
+            seen.append(event)
+
+    def fit(seed):
+        obs, _, _, _ = raw_signal(3000.0, seed=seed)
+        res = tf.fit_spectrum(obs, LAM, 1.0, initial=tf.Film(1000.0, N_SOAP, 1.0),
+                              envelope=2, options=BOX)
+        return float(jax.block_until_ready(res.film.thickness))
+
+    d0 = fit(3)  # (compiled here, or by the tests above: the same shapes and options)
+    monitoring.register_event_duration_secs_listener(listen)
+    try:
+        d1 = fit(4)
+    finally:
+        monitoring.unregister_event_duration_listener(listen)
+    assert seen == []
+    assert abs(d0 - 3000.0) < MARGIN_NM[3000.0] and abs(d1 - 3000.0) < MARGIN_NM[3000.0]
+
+
 def test_thin_film_under_a_quadratic_lamp_is_honestly_uncertain():
     """150 nm under a quadratic lamp fitted with k = 2: the film's one broad fringe trades
     with the lamp's curvature; the standard error says so (7–60 nm over three noise seeds,
@@ -125,6 +156,63 @@ def test_linear_solve_is_numpy_lstsq():
     design = np.concatenate([refl[0, :, None] * mono, mono], axis=1) * w[0, :, None]
     ref, *_ = np.linalg.lstsq(design, w[0] * obs[0], rcond=None)
     np.testing.assert_allclose(np.asarray(r[0]), design @ ref - w[0] * obs[0], atol=1e-7)
+
+
+def _projection_case(theta):
+    """A design that moves with θ (fringes shifting in phase) under random weights: numpy."""
+    lam = np.linspace(400.0, 800.0, 57)
+    basis, _, _ = envelope_basis(lam, 2)
+    rng = np.random.default_rng(5)
+    w = rng.uniform(0.5, 2.0, lam.size)
+    obs = (1.0 + lam / 400.0) * (0.05 + 0.04 * np.sin(lam / 25.0 + 0.3)) + 0.1 \
+        + rng.normal(0.0, 0.01, lam.size)
+    refl = 0.05 + 0.04 * np.sin(lam / 25.0 + theta)
+    return basis, w, obs, refl
+
+
+def _numpy_projected_residual(theta):
+    basis, w, obs, refl = _projection_case(theta)
+    design = np.concatenate([refl[:, None] * basis, basis], axis=1) * w[:, None]
+    u, *_ = np.linalg.lstsq(design, w * obs, rcond=None)
+    return design @ u - w * obs
+
+
+def test_projection_derivatives_are_the_least_squares_ones():
+    """The projected residual's derivatives (the custom JVP of the ridge solve, module
+    docstring "Derivatives"): forward and reverse mode in the film parameter against central
+    differences of `numpy.linalg.lstsq`, in the observations against the closed form
+    ∂r/∂o = (B B⁺ − I) W (numpy's pinv), and the second derivative of ½‖r‖² (what the
+    implicit derivatives of the fit use) against a second difference."""
+    basis, w, obs, _ = _projection_case(0.0)
+    lam = jnp.asarray(np.linspace(400.0, 800.0, 57))
+
+    def solve(theta, o=jnp.asarray(obs)):
+        refl = 0.05 + 0.04 * jnp.sin(lam / 25.0 + theta)
+        r, u = project(refl[None], o[None], jnp.asarray(w)[None], jnp.asarray(basis))
+        return r[0], u[0]
+
+    def r_of(theta, o=jnp.asarray(obs)):
+        return solve(theta, o)[0]
+
+    theta, h = 0.7, 1e-5
+    assert np.min(basis @ np.asarray(solve(theta)[1][:3])) > 0  # the free solution is kept
+    fd = (_numpy_projected_residual(theta + h) - _numpy_projected_residual(theta - h)) / (2 * h)
+    scale = np.max(np.abs(fd))
+    np.testing.assert_allclose(np.asarray(jax.jacfwd(r_of)(theta)), fd, atol=1e-7 * scale)
+    np.testing.assert_allclose(np.asarray(jax.jacrev(r_of)(theta)), fd, atol=1e-7 * scale)
+    _, _, _, refl = _projection_case(theta)
+    design = np.concatenate([refl[:, None] * basis, basis], axis=1) * w[:, None]
+    closed = (design @ np.linalg.pinv(design) - np.eye(w.size)) * w[None, :]
+    np.testing.assert_allclose(np.asarray(jax.jacfwd(lambda o: r_of(theta, o))(
+        jnp.asarray(obs))), closed, atol=1e-9)
+
+    def loss_np(t):
+        return 0.5 * np.sum(_numpy_projected_residual(t) ** 2)
+
+    h2 = 1e-3
+    second = (loss_np(theta + h2) - 2.0 * loss_np(theta) + loss_np(theta - h2)) / h2 ** 2
+    hess = jax.hessian(lambda t: 0.5 * jnp.sum(r_of(t) ** 2))(theta)
+    assert float(hess) == pytest.approx(second, rel=1e-5)
 
 
 def test_negative_gain_falls_back_to_the_offset():

@@ -28,10 +28,21 @@ over the film parameters alone. $\hat u$ is computed by Householder QR
 $\sqrt{\epsilon}\,I$ ($\epsilon$ the dtype's machine epsilon): a ridge of relative size
 √eps, which changes a well-posed solution by $O(\epsilon)$ and keeps value and derivatives
 finite where $A$ is rank deficient ($R$ constant in λ: $d \to 0$, or $\eta_2 = \eta_1$;
-a column $R = 0$). The Jacobian of $r$ is taken by forward-mode AD *through* the QR solve:
-the exact Golub–Pereyra Jacobian, not Kaufman's approximation. Every stage of the search
+a column $R = 0$). Every stage of the search
 (`fit.multistart`: the screen, the short solves, the fringe-order moves, the polish) sees
 only $r(x)$, so the global search runs over the film parameters alone.
+
+**Derivatives.** The Jacobian of $r$ is the exact Golub–Pereyra Jacobian (not Kaufman's
+approximation), taken by forward-mode AD with a custom rule for the solve: with $B = WA$
+(unit columns), $G = B^TB + \epsilon I = R^TR$ ($R$ the QR's triangle) and
+$G\hat u = B^T b$, differentiating gives
+$G\,d\hat u = B^T(db - dB\,\hat u) - dB^T(B\hat u - b)$ and
+$d(B\hat u - b) = dB\,\hat u + B\,d\hat u - db$: two triangular solves with $R$ and four
+products with $n \times m$ matrices. It is the derivative of the same ridge solution that
+AD through the QR gives (they agree to rounding), 13 times cheaper: on a 1161 × 6 design
+(2-core CPU) 0.4 ms against 5.4 ms for JAX's QR derivative rule, ≈ 50 residual
+evaluations, and the Levenberg–Marquardt steps of the search take a Jacobian after every
+accepted step (a raw fit of 1161 wavelengths: 0.23 s warm, from 0.7–3 s).
 
 **Standard errors.** $\operatorname{cov}(x) = s^2 (J_{VP}^T J_{VP})^{-1}$ with $J_{VP}$ the
 Jacobian of the projected residual. At the optimum $J_{VP}^T J_{VP}$ equals, up to terms of
@@ -210,17 +221,45 @@ def project(reflectance, observed, weight, basis, offset: bool = True):
 def _lstsq(a, b):
     """(a û − b, û) of min ‖a u − b‖ (a (n, m)): Householder QR of a with unit-norm columns
     stacked on √eps·I (module docstring)."""
-    m = a.shape[1]
-    eps = jnp.finfo(a.dtype).eps
     n2 = jnp.sum(a * a, axis=0)
     ok = n2 > 0
     s = jnp.where(ok, jnp.sqrt(jnp.where(ok, n2, 1.0)), 1.0)  # double where: zero column
-    a_s = a / s
-    aug = jnp.concatenate([a_s, jnp.sqrt(eps) * jnp.eye(m, dtype=a.dtype)], axis=0)
+    res, u = _ridge_solve(a / s, b)
+    return res, u / s
+
+
+def _ridge_factor(a, b):
+    """(R, û, a û − b) of the ridge least squares min ‖a u − b‖² + eps‖u‖² (a (n, m), unit
+    columns): Householder QR of [a; √eps I] (`jax.numpy.linalg.qr`)."""
+    m = a.shape[1]
+    eps = jnp.finfo(a.dtype).eps
+    aug = jnp.concatenate([a, jnp.sqrt(eps) * jnp.eye(m, dtype=a.dtype)], axis=0)
     q, rr = jnp.linalg.qr(aug)
     rhs = jnp.matmul(q[: b.shape[0]].T, b, precision=_HI)
     u = jax.scipy.linalg.solve_triangular(rr, rhs, lower=False)
-    return jnp.matmul(a_s, u, precision=_HI) - b, u / s
+    return rr, u, jnp.matmul(a, u, precision=_HI) - b
+
+
+@jax.custom_jvp
+def _ridge_solve(a, b):
+    """(a û − b, û), û = argmin ‖a u − b‖² + eps‖u‖² (`_ridge_factor`), with its exact
+    derivative as a custom JVP (module docstring, "Derivatives")."""
+    _, u, res = _ridge_factor(a, b)
+    return res, u
+
+
+@_ridge_solve.defjvp
+def _ridge_solve_jvp(primals, tangents):
+    # G û = aᵀb with G = aᵀa + eps I = RᵀR, differentiated:
+    # G dû = aᵀ(db − da û) − daᵀ(a û − b); d(a û − b) = da û + a dû − db
+    a, b = primals
+    da, db = tangents
+    rr, u, res = _ridge_factor(a, b)
+    dau = jnp.matmul(da, u, precision=_HI)
+    g = jnp.matmul(a.T, db - dau, precision=_HI) - jnp.matmul(da.T, res, precision=_HI)
+    y = jax.scipy.linalg.solve_triangular(rr, g, lower=False, trans="T")
+    du = jax.scipy.linalg.solve_triangular(rr, y, lower=False)
+    return (res, u), (dau + jnp.matmul(a, du, precision=_HI) - db, du)
 
 
 def _moving_mean(x, window):

@@ -79,7 +79,7 @@ from .film_fit import (
     _n_candidates,
     _real_dtype,
     _result,
-    _SpecCfg,
+    _SolveCfg,
     _static,
 )
 from .multistart import grid_starts, order_moves, solve_multistart
@@ -199,7 +199,7 @@ def fit_ellipsometry(psi, delta, wavelength, angle_deg, *, initial: Film | Stack
                                            dtype)
     w = _sigma_weights(sigma_psi, sigma_delta, psi, dtype)
     static, box = _static(spec)
-    cfg = _SpecCfg(static, o.solver, o.rtol, o.atol, grid,
+    cfg = _SolveCfg(static, o.solver, o.rtol, o.atol, grid,
                      _n_candidates(y_starts, grid, o.n_solves), o.start_steps, o.max_steps,
                      o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
                      float(np.mean(np.asarray(wavelength))) if concrete else 550.0)
@@ -212,7 +212,7 @@ def fit_ellipsometry(psi, delta, wavelength, angle_deg, *, initial: Film | Stack
 
 @functools.partial(jax.jit, static_argnames="cfg")
 def _fit_ellipsometry_jit(observed, w, wavelength, cos_theta, base, y_starts, box,
-                          cfg: _SpecCfg):
+                          cfg: _SolveCfg):
     spec = cfg.spec._replace(lo=box[0], hi=box[1])
 
     def res_x(x_free, args):

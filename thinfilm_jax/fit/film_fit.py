@@ -163,16 +163,12 @@ __all__ = ["DEFAULT_BOUNDS", "FILM_PARAMS", "PARAMS", "FitOptions", "FitResult",
 
 
 # ----------------------------------------------------------------------------- fit_film
-class _FilmCfg(NamedTuple):
+class _SolveCfg(NamedTuple):
+    """The static configuration of a multistart solve (`multistart.solve_multistart`) shared
+    by the fits: the spectrum and ellipsometry fits use it as it is, `fit_film` inside its
+    own (`_FilmCfg`)."""
+
     spec: _Spec
-    method: str
-    refine_method: str | None
-    observer: str
-    terms: int
-    shat: str
-    quadrature: tuple
-    start_quadrature: tuple
-    ndf: str
     solver: str
     rtol: float
     atol: float
@@ -185,6 +181,20 @@ class _FilmCfg(NamedTuple):
     n_orders: int
     n_alternatives: int
     wavelength: float
+
+
+class _FilmCfg(NamedTuple):
+    """`fit_film`'s static configuration: the solve's and the forward model's."""
+
+    solve: _SolveCfg
+    method: str
+    refine_method: str | None
+    observer: str
+    terms: int
+    shat: str
+    quadrature: tuple
+    start_quadrature: tuple
+    ndf: str
 
 
 def fit_film(observed, theta_o, *, alpha, initial: Film | Stack,
@@ -274,11 +284,12 @@ def fit_film(observed, theta_o, *, alpha, initial: Film | Stack,
     w = _weights(sigma, observed.shape, dtype)
     lut = build_shat_lut(observer, dtype=dtype) if o.shat == "lut" else None
     static, box = _static(spec)
-    cfg = _FilmCfg(static, method, refine_method, observer, o.terms, o.shat, quadrature,
-                   start_quadrature, o.ndf, o.solver, o.rtol, o.atol, grid,
-                   _n_candidates(y_starts, grid, o.n_solves), o.start_steps, o.max_steps,
-                   o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
-                   _mean_wavelength(observer))
+    solve = _SolveCfg(static, o.solver, o.rtol, o.atol, grid,
+                      _n_candidates(y_starts, grid, o.n_solves), o.start_steps, o.max_steps,
+                      o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
+                      _mean_wavelength(observer))
+    cfg = _FilmCfg(solve, method, refine_method, observer, o.terms, o.shat, quadrature,
+                   start_quadrature, o.ndf)
     box = tuple(jnp.asarray(b, dtype) for b in box)
     with jax.default_matmul_precision("highest"):  # optimistix/lineax contractions too
         out = _fit_film_jit(observed.astype(dtype), w, theta_o.astype(dtype), base, y_starts,
@@ -296,7 +307,7 @@ def _default_starts(n_starts, kind, spec):
 
 @functools.partial(jax.jit, static_argnames="cfg")
 def _fit_film_jit(observed, w, theta_o, base, y_starts, box, lut, cfg: _FilmCfg):
-    spec = cfg.spec._replace(lo=box[0], hi=box[1])
+    spec = cfg.solve.spec._replace(lo=box[0], hi=box[1])
     final_method = cfg.refine_method or cfg.method
 
     def model_x(x, method, quad):
@@ -317,30 +328,15 @@ def _fit_film_jit(observed, w, theta_o, base, y_starts, box, lut, cfg: _FilmCfg)
                 * ww).reshape(-1)
 
     args = (observed, w)
-    orders, distinct = order_moves(spec, base, jnp.cos(theta_o), cfg.wavelength, cfg.n_orders)
+    orders, distinct = order_moves(spec, base, jnp.cos(theta_o), cfg.solve.wavelength,
+                                   cfg.solve.n_orders)
     out = solve_multistart(residuals(cfg.method, cfg.start_quadrature),
-                    residuals(final_method, cfg.quadrature), y_starts, args, cfg, orders,
-                    distinct)
-    return _finish(out, res_x, spec, base, args, w, cfg)
+                           residuals(final_method, cfg.quadrature), y_starts, args, cfg.solve,
+                           orders, distinct)
+    return _finish(out, res_x, spec, base, args, w, cfg.solve)
 
 
 # ----------------------------------------------------------------------------- fit_spectrum
-class _SpecCfg(NamedTuple):
-    spec: _Spec
-    solver: str
-    rtol: float
-    atol: float
-    grid: tuple
-    n_solves: int
-    start_steps: int
-    max_steps: int
-    absolute_sigma: bool
-    batching: str
-    n_orders: int
-    n_alternatives: int
-    wavelength: float
-
-
 def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
                  free: Sequence[str] = ("thickness",), sigma=None, envelope: int | None = None,
                  background=None, options: FitOptions | None = None) -> FitResult:
@@ -441,7 +437,7 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
                                             o.starts, dtype)
     w = _weights(sigma, shape, dtype)
     static, box = _static(spec)
-    cfg = _SpecCfg(static, o.solver, o.rtol, o.atol, grid,
+    cfg = _SolveCfg(static, o.solver, o.rtol, o.atol, grid,
                    _n_candidates(y_starts, grid, o.n_solves), o.start_steps, o.max_steps,
                    o.absolute_sigma, batching, o.n_orders, o.n_alternatives,
                    float(np.mean(wavelength)) if V.is_concrete(wavelength) else 550.0)
@@ -458,7 +454,7 @@ def fit_spectrum(observed, wavelength, cos_theta, *, initial: Film | Stack,
 
 
 @functools.partial(jax.jit, static_argnames="cfg")
-def _fit_spectrum_jit(observed, w, wavelength, cos_theta, base, y_starts, box, cfg: _SpecCfg):
+def _fit_spectrum_jit(observed, w, wavelength, cos_theta, base, y_starts, box, cfg: _SolveCfg):
     spec = cfg.spec._replace(lo=box[0], hi=box[1])
 
     def res(y, args):

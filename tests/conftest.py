@@ -53,9 +53,12 @@ import pytest  # noqa: E402
 # Long tests that build everything they need themselves (no module fixture, no program
 # another test of their file compiles): one unit per parametrisation. The persistent
 # compilation cache above still shares a program two units trace alike.
+# (Not tests/shading/test_sources.py::test_gradients_finite: its one program per dtype,
+# `_shade_and_grad`, is the one its file's other checks run — the float32 one that of
+# test_stiff_inputs_finite — and a unit of its own traced it again and read the ≈ 2 s
+# executable back from the persistent cache: 5.6 of its 5.6 worker-seconds.)
 ALONE = ("tests/shading/test_ibl.py::test_stiff_inputs_finite_and_bounded[",
-         "tests/shading/test_ibl.py::test_gradients_finite[",
-         "tests/shading/test_sources.py::test_gradients_finite[")
+         "tests/shading/test_ibl.py::test_gradients_finite[")
 
 
 def _unit(nodeid: str) -> str:

@@ -39,12 +39,35 @@ def lamps():
     return env, pts, wo, ref
 
 
+@pytest.fixture(scope="module")
+def lamp_prefs(lamps):
+    """The lamps map prefiltered as the published `filtered` method reads it and with the
+    default source split (`improved`'s): built once for the three tests that read them
+    (prefiltering is deterministic host work, ≈ 0.6 s a map)."""
+    env = lamps[0]
+    return prefilter_envmap(env), prefilter_envmap(env, sources=DEFAULT_SOURCES)
+
+
+@pytest.fixture(scope="module")
+def darkened(lamps):
+    """`dark` → the lamps map with its ground ("ground") or all of it ("everywhere") black,
+    prefiltered in float64 once (each dtype's test casts the same tables)."""
+    from thinfilm_jax.shading.envmap import load_envmap
+
+    def build(dark):
+        img = np.array(lamps[0].radiance)
+        img[img.shape[0] // 2 if dark == "ground" else 0:] = 0.0
+        return prefilter_envmap(load_envmap(img))
+
+    return {dark: build(dark) for dark in ("ground", "everywhere")}
+
+
 def _delta_e(values, ref):
     e = exposure_of(ref, DEFAULT_OBSERVER)  # the renders' rule
     return np.asarray(delta_e2000(values * e, ref * e))
 
 
-def test_improved_beats_filtered_under_many_small_sources(lamps):
+def test_improved_beats_filtered_under_many_small_sources(lamps, lamp_prefs):
     """Measured (float64): filtered 4.309 mean ΔE₀₀, improved 2.604 (÷ filtered 0.604);
     the model before the lobe-fitted reads and light-weighted bins (`previous_improved`)
     4.850 (1.13 × filtered). Bounds: improved ≤ 1.25 × measured (3.26) and ≤ 0.7 × filtered
@@ -52,8 +75,7 @@ def test_improved_beats_filtered_under_many_small_sources(lamps):
     Mutations (each fails both bounds): the bins at their uniform-light cosines (Δc = 0)
     3.76 / 0.87 ×; the moment-matched reads with the light-weighted cosines 4.40 / 1.02 ×."""
     env, pts, wo, ref = lamps
-    pf = prefilter_envmap(env)
-    pi = prefilter_envmap(env, sources=DEFAULT_SOURCES)
+    pf, pi = lamp_prefs
     assert not pi.has_sources  # no lamp is a sun: only the bins act
     de_f = _delta_e(np.asarray(envmap_radiance(FILM, ALPHA, pts, wo, pf, method="filtered")),
                     ref)
@@ -69,21 +91,21 @@ def test_improved_beats_filtered_under_many_small_sources(lamps):
     assert de_b.mean() > 1.25 * 2.604 and de_b.mean() > 0.7 * de_f.mean(), de_b.mean()
 
 
-def test_light_spread_under_many_small_sources(lamps):
+def test_light_spread_under_many_small_sources(lamps, lamp_prefs):
     """`ModelOptions(light_spread=True)`: each bin's spread of cos θ₁ follows the second
     moments of its read's light (`methods.improved.bin_radiance_parts`). On this map (no study map
     chose it) measured (float64): 2.520 mean ΔE₀₀ against 2.604 without; asserted: lower by
     at least half that gain (0.04). Mutation: the uniform-light variance without its
     −m₁²x_d² term gives 2.667, worse than without the option."""
     env, pts, wo, ref = lamps
-    pi = prefilter_envmap(env, sources=DEFAULT_SOURCES)
+    pi = lamp_prefs[1]
     de = {ls: _delta_e(np.asarray(envmap_radiance(
         FILM, ALPHA, pts, wo, pi, method="improved",
         options=ModelOptions(shat="lut", light_spread=ls))), ref).mean() for ls in (False, True)}
     assert de[True] <= de[False] - 0.04, de
 
 
-def test_more_reads_per_bin_under_many_small_sources(lamps):
+def test_more_reads_per_bin_under_many_small_sources(lamps, lamp_prefs):
     """`ModelOptions(bin_reads=g)`: each bin's light from g of the g·K reads fitted to the
     lobe, narrower kernels that follow the bin's part of the lobe more closely. On this map
     measured (float64) mean ΔE₀₀: one read a bin 2.604, three 1.657 (two 1.906; with
@@ -91,7 +113,7 @@ def test_more_reads_per_bin_under_many_small_sources(lamps):
     taken across the bins (k, K + k, 2K + k instead of consecutive) gives 1.987 and fails.
     (g = 3 only: its table, the fit of 9 reads, is built once per machine, ≈ 60 s.)"""
     env, pts, wo, ref = lamps
-    pi = prefilter_envmap(env, sources=DEFAULT_SOURCES)
+    pi = lamp_prefs[1]
     de = _delta_e(np.asarray(envmap_radiance(
         FILM, ALPHA, pts, wo, pi, method="improved",
         options=ModelOptions(shat="lut", bin_reads=3))), ref).mean()
@@ -139,18 +161,14 @@ def test_bin_reads_are_the_uniform_model_under_constant_light():
 
 @pytest.mark.parametrize("dark", ["ground", "everywhere"])
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
-def test_bin_reads_gradients_finite(lamps, dtype, dark):
+def test_bin_reads_gradients_finite(darkened, dtype, dark):
     """Gradients of `improved` with three reads a bin and `light_spread` (the pooled,
     luminance-weighted moments divide by the bin's luminance, 0 on a black part of a map)
     are finite in d, η₂ and α, at normal, oblique and grazing views, with the lamps above
     and a black ground below the horizon, and on a black map (reads of no light at all: the
     radiance and its gradients are 0). Mutation: the luminance divided without its guard
     gives NaN on the black map."""
-    from thinfilm_jax.shading.envmap import load_envmap
-
-    img = np.array(lamps[0].radiance)
-    img[img.shape[0] // 2 if dark == "ground" else 0:] = 0.0
-    pref = prefilter_envmap(load_envmap(img)).astype(dtype)
+    pref = darkened[dark].astype(dtype)
     th = np.array([0.0, 0.8, 1.45])
     v = np.stack([np.sin(th) * np.cos(1.0), np.sin(th) * np.sin(1.0), np.cos(th)], -1)
     n = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, np.sin(2.8), np.cos(2.8)]])

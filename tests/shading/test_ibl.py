@@ -643,7 +643,9 @@ def test_explicit_options_equal_to_the_default_give_the_default_program(constant
     assert check_options(ModelOptions()).shat == "exact"  # uniform light: as before
     real = ibl._realtime_jit
     monkeypatch.setattr(ibl, "_realtime_jit", lambda *a: real.lower(*a).as_text())
-    v = view_at(np.array([0.0, 0.7]), phi=0.3)
+    # the views of the tests above (test_constant_environment_reproduces_patch,
+    # test_improved_bins_option): `lower` reuses their traces of the same programs
+    v = view_at(np.array([0.0, 0.6, 1.1, 1.4]), phi=0.3)
 
     def hlo(**kw):
         return envmap_radiance(FILM, 0.25, Z, v, constant[1], method="improved", **kw)

@@ -22,7 +22,7 @@ import jax
 from thinfilm_jax.core._io import atomic_write, write_json
 from ._common import MATERIALS, BenchConfig
 from ._timing import environment, fmt, jsonable, log
-from .error_runtime import bench_patches, bench_shading
+from .error_runtime import absent_from_patches, bench_patches, bench_shading
 from .pareto import markdown_table, pareto_rows, render_error_vs_runtime
 from .peers import bench_peers, memory_roofline, peers_table, write_peers
 from .specialisation import run_specialisation
@@ -115,6 +115,7 @@ def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None 
             "peers": "θ ∈ linspace(0°, 89°, side) × λ ∈ linspace(380, 780, side) nm, d = 600 nm",
         },
         "rows": rows,
+        "panel_b_absent": absent_from_patches(),
         "pareto": {fam: [rows[i]["path"] for i in pareto_rows(rows, fam)]
                    for fam in ("a", "b")},
         "m_selection": m_sweep,
@@ -143,7 +144,8 @@ def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None 
                 config={"name": cfg.name, "peer_sides": list(cfg.peer_sides),
                         "tmm_calls": cfg.tmm_calls, "repeats": cfg.repeats,
                         "extras": cfg.extras})
-    render_error_vs_runtime(rows, out / "error_vs_runtime.png", title=title)
+    render_error_vs_runtime(rows, out / "error_vs_runtime.png", title=title,
+                            absent=result["panel_b_absent"])
     text = report_markdown(result)
     atomic_write(out / "error_vs_runtime.md", lambda tmp: Path(tmp).write_text(text))
     if verbose:
@@ -163,6 +165,10 @@ def report_markdown(result: dict) -> str:
     lines += ["Pareto front (ΔE p95 vs time; rows on another grid or reference excluded): "
               "(a) " + ", ".join(result["pareto"]["a"])
               + "; (b) " + ", ".join(result["pareto"]["b"]), ""]
+    lines += ["Panel (b) has a row for every uniform-light method of the registry "
+              "(`core.methods.names(\"patch\", exact=False)`, `improved` at each preset of "
+              "`ModelOptions.preset`); the registry's other methods: " + "; ".join(
+                  f"`{m}`: {why}" for m, why in result.get("panel_b_absent", {}).items()), ""]
     ms = result["m_selection"]
     lines.append("Smallest Fourier order M (family (a) grid, up to "
                  f"{result['config']['m_sweep_max']}; None = not reached):")

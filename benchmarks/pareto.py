@@ -45,12 +45,14 @@ def pareto_front(times, errors):
     return front
 
 
-def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = ""):
+def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = "",
+                            absent: dict | None = None):
     """Error (ΔE₀₀, log) against warm time per evaluation (s, log), one panel per family,
     Pareto front as a step line. Every point is labelled on the plot with its path (the
     table's "path" column: method and knobs, f32 where float32), not a number keyed to a
     list; errors below `ERROR_FLOOR` (the references, exact specialisations) are drawn on the
-    floor as open markers. Returns the figure (written to `path`)."""
+    floor as open markers. `absent` ({method: why}) is written under panel (b): the methods
+    that have no point there and why. Returns the figure (written to `path`)."""
     from thinfilm_jax.render import plot as plt  # the caller's backend untouched
 
     panels = [("a", "(a) per shading point: band reflectance R_j(cos θ)",
@@ -95,6 +97,9 @@ def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = 
         ax.grid(True, which="both", alpha=0.25)
         ax.legend(fontsize=7, loc="lower left")
     fig.suptitle(title, fontsize=10)
+    if absent:
+        fig.text(0.99, 0.005, "Not a point in (b): " + "; ".join(
+            f"{m}: {why}" for m, why in absent.items()), ha="right", va="bottom", fontsize=7)
     atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     return fig
 

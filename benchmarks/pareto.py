@@ -162,19 +162,20 @@ def render_kernel_pareto(rows, path, title: str = "") -> None:
     fig, axes = plt.subplots(1, 2, figsize=(15, 6.2), constrained_layout=True)
     colours = {"ideal": "tab:grey", "filtered": "tab:blue", "improved": "tab:red"}
     for ax, metric in zip(axes, ("mean", "p95")):
+        labels = []  # placed once the scales are set, stepped apart where they would overlap
         for g, c in colours.items():
             sel = [r for r in rows if r["group"] == g]
             ax.scatter([r["us_per_point"] for r in sel], [r[metric] for r in sel], color=c,
                        label=g, s=40, zorder=3)
-            for r in sel:
-                ax.annotate(r["path"].replace("filtered K29", "K29"), (r["us_per_point"],
-                            r[metric]), fontsize=7, xytext=(4, 2), textcoords="offset points")
+            labels += [(r["us_per_point"], r[metric], r["path"].replace("filtered K29", "K29"),
+                        "k") for r in sel]
         t = np.array([r["us_per_point"] for r in rows])
         e = np.array([r[metric] for r in rows])
         f = pareto_front(t, e)
         ax.step(t[f], e[f], where="post", color="k", lw=1, alpha=0.6, label="Pareto front")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        _place_labels(ax, labels, fontsize=7)
         ax.set_xlabel("warm cost per shading point, float32, CPU (µs, median, interleaved)")
         ax.set_ylabel(f"CIEDE2000 ΔE vs reference, {metric} over the wide grid")
         ax.grid(True, which="both", alpha=0.3)

@@ -47,7 +47,7 @@ TABLE_FILM = dict(thickness=600.0, eta_film=1.3, eta_base=2.0, kappa_base=0.5)
 TABLE_ALPHA = 0.25
 
 
-def method_programs(points: int, presets=("fast", "default", "accurate")):
+def method_programs(presets=("fast", "default", "accurate")):
     """{row name: (method, preset or None, `ModelOptions`)} of the real-time rows: every
     ``envmap_kind == "realtime"`` method of the registry, `improved` once per preset."""
     from thinfilm_jax.core.methods import implementation, names
@@ -98,7 +98,7 @@ def run_method_cost(out="figures", points: int = 2**18, repeats: int = 7,
     jax.block_until_ready(pref)
     prefilter_s = time.perf_counter() - t0
     args = (film, pts["alpha"], pts["normal"], pts["wo"], pref)
-    progs = method_programs(points, presets)
+    progs = method_programs(presets)
     calls, compile_s, meta = {}, {}, {}
 
     def add(name, fn, a, **info):

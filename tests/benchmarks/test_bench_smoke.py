@@ -102,3 +102,27 @@ def test_bins_cost_tiny():
                                       "improved K=3 + spread"} | {
                                           f"improved {k}" for k in READS_VARIANTS}
     assert all(v > 0 for v in r["ns_per_point"].values())
+
+
+def test_method_cost_rows_follow_the_registry():
+    """The cost table (`benchmarks.method_cost`) times every real-time `envmap_radiance`
+    method of the registry as it stands, a method registered at run time included, and
+    `improved` once per named preset (no timing here)."""
+    from benchmarks.method_cost import method_programs
+    from thinfilm_jax import ModelOptions
+
+    methods.register(methods.Method("filtered_again", ("envmap",), False, "bands", False,
+                                    "filtered under another name (test)",
+                                    impl=methods.implementation("filtered")))
+    try:
+        progs = method_programs()
+    finally:
+        methods.unregister("filtered_again")
+    assert "filtered_again" in progs
+    realtime = {m for m in methods.names("envmap")
+                if methods.implementation(m).envmap_kind == "realtime"}
+    assert {m for m, _, _ in progs.values()} == realtime | {"filtered_again"}
+    for p in ("fast", "default", "accurate"):
+        m, preset, opts = progs[f"improved {p}"]
+        q = ModelOptions.preset(p)
+        assert (m, preset, opts.bins, opts.bin_reads) == ("improved", p, q.bins, q.bin_reads)

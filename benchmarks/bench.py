@@ -101,7 +101,8 @@ def run_rows_only(out="figures", *, config: BenchConfig | None = None,
     rows = rows_a + rows_b
     result = dict(old)
     result.update({
-        "environment": env, "environment_other_sections": old["environment"],
+        "environment": env,
+        "environment_other_sections": old.get("environment_other_sections", old["environment"]),
         "config": dataclasses.asdict(cfg), "rows": rows,
         "panel_b_absent": absent_from_patches(),
         "pareto": {fam: [rows[i]["path"] for i in pareto_rows(rows, fam)] for fam in "ab"},

@@ -107,23 +107,38 @@ def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = 
 
 def _place_labels(ax, labels, fontsize: float = 6.2) -> None:
     """Write each point's text beside it, stepping a label up or down (with a thin leader
-    line) until its box overlaps no label already written: clusters of points (the
-    filtered variants, the kernels) stay readable."""
+    line) until its box overlaps no label already written and no other point's marker and
+    stays inside the axes: clusters of points (the filtered variants, the kernels) stay
+    readable."""
     ax.autoscale_view()
     fig = ax.figure
     pt = fig.dpi / 72.0  # display pixels per typographic point
     h = 1.25 * fontsize * pt
+    m = 4.0 * pt  # half a marker's width: no label is written over another point's marker
+    inside = ax.get_window_extent()  # labels stay within the axes (off the title)
     boxes: list = []
+    for x, y, _, _ in labels:
+        px, py = ax.transData.transform((x, y))
+        boxes.append((px - m, py - h / 2, 2 * m))
     for x, y, text, colour in sorted(labels, key=lambda v: (v[1], v[0]), reverse=True):
         px, py = ax.transData.transform((x, y))
         w = 0.56 * fontsize * pt * len(text)
-        for k in (0, -1, 1, -2, 2, -3, 3, -4, 4, -5, 5, -6, 6, -8, 8):
-            x0, y0 = px + 4 * pt, py + k * h - 0.3 * h
-            if not any(x0 < bx + bw and bx < x0 + w and y0 < by + h and by < y0 + h
-                       for bx, by, bw in boxes):
+        x0, best = px + m + pt, None  # best: (overlaps, k) of the least crowded place
+        for k in (0, -1, 1, -2, 2, -3, 3, -4, 4, -5, 5, -6, 6, -7, 7, -8, 8, -10, 10, -12, 12,
+                  -14, 14, -16, 16):
+            y0 = py + k * h - 0.3 * h
+            if not (inside.y0 <= y0 and y0 + h <= inside.y1):
+                continue
+            hits = sum(x0 < bx + bw and bx < x0 + w and y0 < by + h and by < y0 + h
+                       for bx, by, bw in boxes)
+            if best is None or hits < best[0]:
+                best = (hits, k)
+            if hits == 0:
                 break
+        k = 0 if best is None else best[1]
+        y0 = py + k * h - 0.3 * h
         boxes.append((x0, y0, w))
-        ax.annotate(text, (x, y), xytext=(4, k * h / pt), textcoords="offset points",
+        ax.annotate(text, (x, y), xytext=((x0 - px) / pt, k * h / pt), textcoords="offset points",
                     fontsize=fontsize, color=colour, va="center",
                     arrowprops=None if k == 0 else dict(arrowstyle="-", lw=0.4,
                                                          color=colour, alpha=0.6))

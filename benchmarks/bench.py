@@ -189,7 +189,7 @@ def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None 
         from .method_cost import run_method_cost  # method_cost.json / .md: ns a point, maps
 
         result["method_cost"] = run_method_cost(out, points=4096 if small else 2**18,
-                                                repeats=3 if small else 7,
+                                                repeats=3 if small else 21,
                                                 exact_points=16 if small else 64,
                                                 verbose=verbose)["rows"]
     result["seconds_total"] = time.perf_counter() - t_start

@@ -75,7 +75,7 @@ def _jit(method, opts, **kw):
                                                          options=opts, **kw))
 
 
-def run_method_cost(out="figures", points: int = 2**18, repeats: int = 7,
+def run_method_cost(out="figures", points: int = 2**18, repeats: int = 21,
                     exact_points: int = 64, exact_repeats: int = 3,
                     presets=("fast", "default", "accurate"), table_resolution=(16, 32),
                     verbose: bool = True) -> dict:
@@ -241,7 +241,7 @@ def main(argv=None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="figures")
     p.add_argument("--points", type=int, default=2**18)
-    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--repeats", type=int, default=21)
     p.add_argument("--exact-points", type=int, default=64)
     p.add_argument("--quick", action="store_true", help="4096 points, 3 rounds, 16 exact")
     args = p.parse_args(argv)

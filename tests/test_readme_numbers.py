@@ -811,7 +811,7 @@ SPECS = [
              r"\(K = 3\) and \*\*(\S+)×\*\* with `preset\(\"accurate\"\)` \(three reads a bin\); "
              r"`ideal` (\S+)×, `khr` (\S+)×; `colour_table` (\S+)× `filtered` on the same points "
              r"of one film at one α \(its table's build apart\); the float64 references are "
-             r"\S+ times slower \(`reference` (\S+)×, `mc` (\S+)×\)", ("method_cost.json",),
+             r"10⁴–10⁶ times slower \(`reference` (\S+)×, `mc` (\S+)×\)", ("method_cost.json",),
              lambda: _method_cost("improved fast", "improved default", "improved accurate",
                                   "ideal", "khr", "colour_table", "reference", "mc")),
     Sentence(r"`colour_table` \(one film\) \| (\S+) / (\S+) / (\S+); (\S+); (\S+); (\S+) \|",

@@ -46,8 +46,12 @@ class BenchConfig:
     reference_quadrature: int = 96
     check_quadrature: int = 64
     quadrature_orders: tuple[int, ...] = (8, 16, 24, 32, 48, 64)
-    patch_methods: tuple[str, ...] = ("ideal", "filtered", "filtered_gt_moments",
-                                      "filtered_gt_opd")
+    # the approximate methods of panel (b): None = every uniform-light method of the registry
+    # (`core.methods.names("patch", exact=False)`, read when the bench runs, so a method
+    # registered at run time gets its row); `improved` once per named preset of
+    # `improved_presets` (`ModelOptions.preset`)
+    patch_methods: tuple[str, ...] | None = None
+    improved_presets: tuple[str, ...] = ("fast", "default", "accurate")
     patch_chunk: int = 12  # patches per timed call (the error pass runs all chunks)
     mc_samples: tuple[int, ...] = (1_000, 10_000, 100_000)
     mc_patches: int = 12
@@ -76,7 +80,7 @@ class BenchConfig:
                    fourier_terms=(1, 2, 4), gaussian_terms=(2,), m_sweep_max=12,
                    patch_thickness=(600.0,), patch_theta_deg=(0.0, 70.0, 89.0),
                    patch_alpha=(0.05, 0.4), reference_quadrature=48, check_quadrature=32,
-                   quadrature_orders=(8, 16, 32), patch_methods=("ideal", "filtered_gt_moments"),
+                   quadrature_orders=(8, 16, 32),
                    patch_chunk=8, mc_samples=(1_000,), mc_patches=4, mc_chunk=4,
                    lut_resolutions=((25.0, 128),), kernel_points=10_000,
                    specialisation_points=20_000, peer_sides=(100,),
@@ -89,7 +93,7 @@ class BenchConfig:
                    fourier_terms=(2,), gaussian_terms=(), m_sweep_max=3,
                    patch_thickness=(600.0,), patch_theta_deg=(30.0,), patch_alpha=(0.2,),
                    reference_quadrature=12, check_quadrature=8, quadrature_orders=(8,),
-                   patch_methods=("ideal", "filtered_gt_moments"), patch_chunk=2,
+                   improved_presets=("default",), patch_chunk=2,
                    mc_samples=(64,), mc_patches=1, mc_chunk=1, lut_resolutions=((50.0, 32),),
                    kernel_points=64, specialisation_points=256, peer_sides=(4,),
                    tmm_calls=2, extras=False,

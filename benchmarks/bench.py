@@ -4,9 +4,12 @@
 specialisation costs (`specialisation`) and the stability suite (`stability`), and writes
 ``bench.json``, ``error_vs_runtime.png``, ``error_vs_runtime.md``, ``peers.json``, ``peers.md``
 (the peers also under "peers" in ``bench.json``), ``specialisation.json``, ``specialisation.md``
-and ``stability_report.md``: ``python -m benchmarks.bench [--quick] [--repeats N]
-[--no-stability]`` from a clone (``make bench``); ``--suite`` runs the other studies
-(`run_suite`). Benchmarks never assert timings.
+and ``stability_report.md``, then the kernel costs (``kernel_bench.*``) and the cost of every
+method a shading point under a map against `filtered` (``method_cost.*``, `method_cost`):
+``python -m benchmarks.bench [--quick] [--repeats N] [--no-stability]`` from a clone
+(``make bench``); ``--rows-only`` reruns the error-vs-run-time rows alone and merges them
+into ``bench.json`` (`run_rows_only`); ``--suite`` runs the other studies (`run_suite`;
+``--suite cost``: ``method_cost.*`` alone). Benchmarks never assert timings.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import jax
 from thinfilm_jax.core._io import atomic_write, write_json
 from ._common import MATERIALS, BenchConfig
 from ._timing import environment, fmt, jsonable, log
-from .error_runtime import bench_patches, bench_shading
+from .error_runtime import absent_from_patches, bench_patches, bench_shading
 from .pareto import markdown_table, pareto_rows, render_error_vs_runtime
 from .peers import bench_peers, memory_roofline, peers_table, write_peers
 from .specialisation import run_specialisation
@@ -76,6 +79,54 @@ def summarise_targets(rows, peers) -> dict:
     return s
 
 
+def run_rows_only(out="figures", *, config: BenchConfig | None = None,
+                  verbose: bool = True) -> dict:
+    """Rerun the error-vs-run-time rows alone (panels (a) and (b): `bench_shading`,
+    `bench_patches`) and merge them into ``out/bench.json`` (which must exist), keeping its
+    peers, specialisation, stability and kernels sections from the run that wrote them (their
+    own files are not touched); rewrites ``error_vs_runtime.png`` / ``.md``. The rows' machine
+    and time are in "environment", the earlier run's in "environment_other_sections"."""
+    import json
+
+    if not jax.config.jax_enable_x64:
+        raise RuntimeError("run_rows_only needs float64: jax.config.update('jax_enable_x64', "
+                           "True)")
+    cfg = config or BenchConfig.full()
+    out = Path(out)
+    old = json.loads((out / "bench.json").read_text())
+    t_start = time.perf_counter()
+    env = environment()
+    rows_a, m_sweep = bench_shading(cfg, verbose)
+    rows_b, ref_check, lut_table = bench_patches(cfg, verbose)
+    rows = rows_a + rows_b
+    result = dict(old)
+    result.update({
+        "environment": env,
+        "environment_other_sections": old.get("environment_other_sections", old["environment"]),
+        "config": dataclasses.asdict(cfg), "rows": rows,
+        "panel_b_absent": absent_from_patches(),
+        "pareto": {fam: [rows[i]["path"] for i in pareto_rows(rows, fam)] for fam in "ab"},
+        "m_selection": m_sweep, "reference_check": ref_check, "lut": lut_table,
+        "targets": summarise_targets(rows, old.get("peers", {})),
+        "seconds_rows": time.perf_counter() - t_start})
+    _write_rows_report(result, out, cfg, env, verbose)
+    return result
+
+
+def _write_rows_report(result, out, cfg, env, verbose):
+    """bench.json, error_vs_runtime.png and error_vs_runtime.md of `result`."""
+    title = (f"thinfilm_jax {cfg.name} benchmark on {', '.join(env['devices'])} "
+             f"({env['cpu_count']} CPUs, load {env['load_average'][0]:.1f} at start); "
+             f"warm median of {cfg.repeats}")
+    write_json(out / "bench.json", jsonable(result))
+    render_error_vs_runtime(result["rows"], out / "error_vs_runtime.png", title=title,
+                            absent=result["panel_b_absent"])
+    text = report_markdown(result)
+    atomic_write(out / "error_vs_runtime.md", lambda tmp: Path(tmp).write_text(text))
+    if verbose:
+        print(text)
+
+
 def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None = None,
               verbose: bool = True) -> dict:
     """Run the whole study and write its files (module docstring) into `out`.
@@ -115,6 +166,7 @@ def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None 
             "peers": "θ ∈ linspace(0°, 89°, side) × λ ∈ linspace(380, 780, side) nm, d = 600 nm",
         },
         "rows": rows,
+        "panel_b_absent": absent_from_patches(),
         "pareto": {fam: [rows[i]["path"] for i in pareto_rows(rows, fam)]
                    for fam in ("a", "b")},
         "m_selection": m_sweep,
@@ -134,20 +186,18 @@ def run_bench(out="figures", quick: bool = False, *, config: BenchConfig | None 
         small = cfg.name == "quick"
         result["kernels"] = run_kernel_bench(out, points=4096 if small else 65536,
                                              repeats=3 if small else 7, verbose=verbose)
+        from .method_cost import run_method_cost  # method_cost.json / .md: ns a point, maps
+
+        result["method_cost"] = run_method_cost(out, points=4096 if small else 2**18,
+                                                repeats=3 if small else 21,
+                                                exact_points=16 if small else 64,
+                                                verbose=verbose)["rows"]
     result["seconds_total"] = time.perf_counter() - t_start
-    title = (f"thinfilm_jax {cfg.name} benchmark on {', '.join(env['devices'])} "
-             f"({env['cpu_count']} CPUs, load {env['load_average'][0]:.1f} at start); "
-             f"warm median of {cfg.repeats}")
-    write_json(out / "bench.json", jsonable(result))
     write_peers(peers, out, environment_=env, command="python -m benchmarks.bench (run_bench)",
                 config={"name": cfg.name, "peer_sides": list(cfg.peer_sides),
                         "tmm_calls": cfg.tmm_calls, "repeats": cfg.repeats,
                         "extras": cfg.extras})
-    render_error_vs_runtime(rows, out / "error_vs_runtime.png", title=title)
-    text = report_markdown(result)
-    atomic_write(out / "error_vs_runtime.md", lambda tmp: Path(tmp).write_text(text))
-    if verbose:
-        print(text)
+    _write_rows_report(result, out, cfg, env, verbose)
     return result
 
 
@@ -160,9 +210,19 @@ def report_markdown(result: dict) -> str:
              f"{env['load_average']}, {env['date']}. Warm time: median of "
              f"{result['config']['repeats']} calls per evaluation; compile = first call − warm.",
              "", markdown_table(rows), ""]
+    other = result.get("environment_other_sections")
+    if other:  # `run_rows_only`: the rows above are newer than the sections below
+        lines += [f"The rows above: `python -m benchmarks.bench --rows-only` ("
+                  f"{result['seconds_rows']:.0f} s). Peers, specialisation, stability and "
+                  f"kernels below: the run of {other['date']} (load average at start "
+                  f"{other['load_average']}).", ""]
     lines += ["Pareto front (ΔE p95 vs time; rows on another grid or reference excluded): "
               "(a) " + ", ".join(result["pareto"]["a"])
               + "; (b) " + ", ".join(result["pareto"]["b"]), ""]
+    lines += ["Panel (b) has a row for every uniform-light method of the registry "
+              "(`core.methods.names(\"patch\", exact=False)`, `improved` at each preset of "
+              "`ModelOptions.preset`); the registry's other methods: " + "; ".join(
+                  f"`{m}`: {why}" for m, why in result.get("panel_b_absent", {}).items()), ""]
     ms = result["m_selection"]
     lines.append("Smallest Fourier order M (family (a) grid, up to "
                  f"{result['config']['m_sweep_max']}; None = not reached):")
@@ -199,7 +259,8 @@ def report_markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-SUITES = ("core", "ibl", "scaling", "improved", "models", "colour_table", "materials", "photo")
+SUITES = ("core", "ibl", "scaling", "improved", "models", "colour_table", "materials", "photo",
+          "cost")
 
 
 def run_suite(suite: str, out: str = "figures", quick: bool = False) -> None:
@@ -233,13 +294,17 @@ def run_suite(suite: str, out: str = "figures", quick: bool = False) -> None:
         from . import photo_study
 
         photo_study.run(out=out, quick=quick)
+    elif suite == "cost":
+        from .method_cost import main as cost_main
+
+        cost_main(["--out", str(out)] + (["--quick"] if quick else []))
     else:
         raise ValueError(f"suite must be one of {SUITES}, got {suite!r}")
 
 
 def main(argv=None) -> int:
     """``python -m benchmarks.bench [--suite S]``: `run_bench` (``--suite core``, the
-    default) or another suite (`run_suite`), or all eight (``--suite all``)."""
+    default) or another suite (`run_suite`), or all nine (``--suite all``)."""
     p = argparse.ArgumentParser(prog="python -m benchmarks.bench", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="figures", help="output folder (default: figures)")
@@ -257,10 +322,14 @@ def main(argv=None) -> int:
                         "silicon, constant vs dispersive Si, the real-time methods on "
                         "dispersive films (figures/materials.*); photo: thickness maps from "
                         "synthetic photographs and fit_spectrum against optifik "
-                        "(figures/photo_study.*); all: the eight")
+                        "(figures/photo_study.*); cost: ns a shading point of every method "
+                        "under a map against filtered (figures/method_cost.*); all: the nine")
     p.add_argument("--repeats", type=int, help="core: warm repeats per timing (default 5)")
     p.add_argument("--no-stability", action="store_true",
                    help="core: skip stability_report.md")
+    p.add_argument("--rows-only", action="store_true",
+                   help="core: rerun the error-vs-run-time rows (panels a and b) alone and "
+                        "merge them into the existing bench.json (run_rows_only)")
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     from thinfilm_jax.core.compilation_cache import enable_compilation_cache
@@ -272,9 +341,12 @@ def main(argv=None) -> int:
             cfg = dataclasses.replace(cfg, repeats=args.repeats)
         if args.no_stability:
             cfg = dataclasses.replace(cfg, stability=False)
-        result = run_bench(out=args.out, config=cfg)
-        print(f"total {result['seconds_total']:.0f} s; wrote {args.out}/bench.json, "
-              "error_vs_runtime.png, error_vs_runtime.md", file=sys.stderr)
+        if args.rows_only:
+            run_rows_only(out=args.out, config=cfg)
+        else:
+            result = run_bench(out=args.out, config=cfg)
+            print(f"total {result['seconds_total']:.0f} s; wrote {args.out}/bench.json, "
+                  "error_vs_runtime.png, error_vs_runtime.md", file=sys.stderr)
     for suite in SUITES[1:]:
         if args.suite in (suite, "all"):
             run_suite(suite, out=args.out, quick=args.quick)

@@ -13,8 +13,11 @@ Two families of paths, each against its own converged float64 reference:
     Grid `shading_grid`: 4 materials (`MATERIALS`) × d ∈ [0, 1000] nm × θ ∈ [0°, 89°].
 (b) **per patch** — L_j(θ_o, α) under uniform light (SPEC §7): the half-vector quadrature
     of `patch_radiance(method="reference")` at several orders, Monte Carlo
-    (`patch_radiance_mc`), `ideal`, `filtered`, `filtered_gt_moments`, `filtered_gt_opd`,
-    the LUT against the exact filtered Ŝ, float32; reference:
+    (`patch_radiance_mc`), every approximate method of `patch_radiance` in the registry
+    (`patch_method_rows`: `core.methods.names("patch", exact=False)` — ideal, the filtered
+    variants, `improved` at each named preset of `ModelOptions.preset`, `khr` — read when the
+    bench runs; the registry's methods without a uniform-light form are named in the report,
+    `absent_from_patches`), the LUT against the exact filtered Ŝ, float32; reference:
     `patch_radiance(method="reference", quadrature=(96, 96))` (its own error is checked
     against order 64 and against Monte Carlo, `bench.json["reference_check"]`).
     Grid `patch_grid`: 4 materials × d ∈ {200, 600, 1000} nm × θ_o ∈ {0, 45, 70, 85, 89}° ×
@@ -45,7 +48,8 @@ from thinfilm_jax.core.film import Film
 from thinfilm_jax.core.material import expand_batch
 from thinfilm_jax.realtime.kernels import filtered_kernel, ideal_kernel, lobe_moments
 from thinfilm_jax.spectral.lut import build_shat_lut, lut_max_error
-from thinfilm_jax.realtime.options import ModelOptions
+from thinfilm_jax.core.methods import names as method_names
+from thinfilm_jax.realtime.options import PRESETS, ModelOptions
 from thinfilm_jax.shading.patch import patch_radiance, patch_radiance_mc
 from thinfilm_jax.spectral.reflectance import fourier_bands, rgb_reflectance
 from thinfilm_jax.spectral.spectra import get_observer, trapezoid_weights
@@ -127,6 +131,50 @@ def spectral_subsampled(film: Film, cos_theta, lam, weights, arithmetic: str = "
     r = airy_reflectance(film_k, jnp.asarray(cos_theta)[..., None], jnp.asarray(lam, dtype),
                          arithmetic=arithmetic)
     return r @ jnp.asarray(weights, dtype)
+
+
+def patch_method_rows(cfg: BenchConfig) -> list[tuple[str, str, str | None]]:
+    """(path, method, preset) of panel (b)'s method rows: every approximate uniform-light
+    method of the registry as it stands when called (`core.methods.names("patch",
+    exact=False)`; `cfg.patch_methods` when set), `improved` once per preset of
+    `cfg.improved_presets` (`ModelOptions.preset`; preset None for the other methods).
+
+    Example:
+        >>> rows = patch_method_rows(BenchConfig())
+        >>> [p for p, m, _ in rows if m == "improved"][:2]
+        ['improved fast (K=2)', 'improved default (K=3)']
+        >>> {m for _, m, _ in rows} == set(method_names("patch", exact=False))
+        True
+    """
+    methods = (method_names("patch", exact=False) if cfg.patch_methods is None
+               else cfg.patch_methods)
+    rows = []
+    for m in methods:
+        if m != "improved":
+            rows.append((m, m, None))
+            continue
+        for preset in cfg.improved_presets:
+            o = ModelOptions.preset(preset)
+            reads = (f", {o.bin_reads} reads a bin: under uniform light = K={o.bins}"
+                     if o.bin_reads > 1 else "")
+            rows.append((f"improved {preset} (K={o.bins}{reads})", m, preset))
+    return rows
+
+
+def absent_from_patches() -> dict[str, str]:
+    """{method: why it has no row of its own in panel (b)}: the methods of the registry's
+    other entry points (`names("envmap")`) that `patch_radiance` does not offer.
+
+    Example:
+        >>> sorted(absent_from_patches())
+        ['colour_table', 'mc']
+    """
+    why = {"mc": "its uniform-light form is patch_radiance_mc: the 'Monte Carlo' rows",
+           "colour_table": "no uniform-light form (a table of one material under one map, "
+                           "prefilter_colour); its cost under a map: method_cost.md"}
+    patch = set(method_names("patch"))
+    return {m: why.get(m, "no uniform-light form (not offered by patch_radiance)")
+            for m in method_names("envmap") if m not in patch}
 
 
 def _smallest_m(errs: list[dict], key: str, tol: float):
@@ -296,12 +344,14 @@ def bench_patches(cfg: BenchConfig, verbose: bool = True):
                             "max_z": float(z.max()), "patches": int(len(sub))}
 
     method_out = {}
-    for method in cfg.patch_methods:
-        method_out[method] = run(patch_fn(method=method), args64, method, "patch method",
-                                 {"method": method, "terms": 2, "shat": "exact"}, np.float64,
-                                 ref, ref_name)
+    for path, method, preset in patch_method_rows(cfg):
+        knobs = {} if preset is None else PRESETS[preset]
+        out = run(patch_fn(method=method, **knobs), args64, path, "patch method",
+                  {"method": method, "terms": 2, "shat": "exact", **knobs,
+                   **({} if preset is None else {"preset": preset})}, np.float64, ref, ref_name)
+        method_out.setdefault(method, out)
     for method in ("ideal", "filtered_gt_moments"):
-        if cfg.extras and method in cfg.patch_methods:
+        if cfg.extras and method in method_out:
             run(patch_fn(method=method), args32, f"{method} f32", "float32",
                 {"method": method, "terms": 2, "shat": "exact"}, np.float32, ref, ref_name)
 

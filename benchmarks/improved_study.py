@@ -5,7 +5,8 @@
 ``improved_pareto.png`` (ΔE against cost per shading point, every kernel option) and
 ``improved_figure7.png`` (ΔE maps of both methods on the two Figure 7 panel sets);
 ``--floor`` writes ``improved_ibl_floor.json`` (`ibl_floor`: what any split-sum method can
-reach under the shipped maps when its film term is exact).
+reach under the shipped maps when its film term is exact); ``--replot`` redraws
+``improved_pareto.png`` from ``improved.json``.
 
 Uniform light (SPEC §7), against `patch_radiance(method="reference")`:
 * the wide grid: 4 materials (`MATERIALS`: κ₃ ∈ {0, 0, 0.5, 3.99}) × d ∈ {300, 600, 1000} nm ×
@@ -591,14 +592,24 @@ def run(cfg: StudyConfig = StudyConfig(), out="figures", verbose=True) -> dict:
         result["ibl"] = ibl_renders(verbose, held_out=cfg.held_out)
     result["kernels"] = kernel_rows(cfg, ref, verbose)
     text = write_report(out, "improved", result, markdown)
-    render_kernel_pareto(result["kernels"], out / "improved_pareto.png",
-                "Real-time kernels, uniform light: error on the wide grid (4 materials × d ≤ "
-                "1000 nm × θ_o ≤ 88° × α ∈ [0.01, 0.9]) against float32 cost per shading "
-                f"point ({env['cpu_count']} shared CPUs)")
+    plot_kernel_pareto(result, out)
     plot_fig7(maps, cfg, out / "improved_figure7.png")
     if verbose:
         print(text)
     return result
+
+
+def plot_kernel_pareto(result, out) -> None:
+    """``improved_pareto.png`` of a study's `result` (its "kernels" rows): the uniform-light
+    kernels given the lobe's moments, no map; the cost of each method under a map against
+    `filtered` is ``method_cost.md`` (`benchmarks.method_cost`), said in the title."""
+    env = result["environment"]
+    render_kernel_pareto(result["kernels"], Path(out) / "improved_pareto.png",
+                "Real-time kernels, uniform light (no map; the lobe's moments given): error "
+                "on the wide grid (4 materials × d ≤ 1000 nm × θ_o ≤ 88° × α ∈ [0.01, 0.9]) "
+                f"against float32 cost per shading point ({env['cpu_count']} shared CPUs, "
+                f"{env['date'][:10]}).\nThese are kernel costs; a method's cost a shading point "
+                "under an environment map against filtered: figures/method_cost.md")
 
 
 def main(argv=None) -> int:
@@ -609,11 +620,19 @@ def main(argv=None) -> int:
     p.add_argument("--no-ibl", action="store_true", help="skip the IBL renders")
     p.add_argument("--no-held-out", action="store_true",
                    help="skip the held-out sun maps (their references take a few minutes)")
+    p.add_argument("--replot", action="store_true",
+                   help="only redraw improved_pareto.png from out/improved.json")
     p.add_argument("--floor", action="store_true",
                    help="only the IBL floor of split-sum methods (`ibl_floor`, ≈ 10 min): "
                         "writes improved_ibl_floor.json")
     args = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
+    if args.replot:
+        import json
+
+        plot_kernel_pareto(json.loads((Path(args.out) / "improved.json").read_text()),
+                           args.out)
+        return 0
     if args.floor:
         write_json(Path(args.out) / "improved_ibl_floor.json", jsonable(ibl_floor()))
         return 0

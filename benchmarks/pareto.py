@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 
 import numpy as np
 
@@ -45,12 +46,14 @@ def pareto_front(times, errors):
     return front
 
 
-def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = ""):
+def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = "",
+                            absent: dict | None = None):
     """Error (ΔE₀₀, log) against warm time per evaluation (s, log), one panel per family,
     Pareto front as a step line. Every point is labelled on the plot with its path (the
     table's "path" column: method and knobs, f32 where float32), not a number keyed to a
     list; errors below `ERROR_FLOOR` (the references, exact specialisations) are drawn on the
-    floor as open markers. Returns the figure (written to `path`)."""
+    floor as open markers. `absent` ({method: why}) is written under panel (b): the methods
+    that have no point there and why. Returns the figure (written to `path`)."""
     from thinfilm_jax.render import plot as plt  # the caller's backend untouched
 
     panels = [("a", "(a) per shading point: band reflectance R_j(cos θ)",
@@ -91,7 +94,10 @@ def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = 
         ax.set_xlabel(xlabel)
         ax.set_ylabel(f"CIEDE2000 ΔE vs float64 reference, {metric.split('_')[1]} over the "
                       f"grid (open: < {ERROR_FLOOR:g})")
-        ax.set_title(ptitle, fontsize=11)
+        if fam == "b" and absent:  # the registry's methods without a point here, and why
+            ptitle += "\n" + textwrap.fill("No point here: " + "; ".join(
+                f"{m}: {why}" for m, why in absent.items()), 150)
+        ax.set_title(ptitle, fontsize=11 if "\n" not in ptitle else 9)
         ax.grid(True, which="both", alpha=0.25)
         ax.legend(fontsize=7, loc="lower left")
     fig.suptitle(title, fontsize=10)
@@ -101,23 +107,38 @@ def render_error_vs_runtime(rows, path, *, metric: str = "dE_p95", title: str = 
 
 def _place_labels(ax, labels, fontsize: float = 6.2) -> None:
     """Write each point's text beside it, stepping a label up or down (with a thin leader
-    line) until its box overlaps no label already written: clusters of points (the
-    filtered variants, the kernels) stay readable."""
+    line) until its box overlaps no label already written and no other point's marker and
+    stays inside the axes: clusters of points (the filtered variants, the kernels) stay
+    readable."""
     ax.autoscale_view()
     fig = ax.figure
     pt = fig.dpi / 72.0  # display pixels per typographic point
     h = 1.25 * fontsize * pt
+    m = 4.0 * pt  # half a marker's width: no label is written over another point's marker
+    inside = ax.get_window_extent()  # labels stay within the axes (off the title)
     boxes: list = []
+    for x, y, _, _ in labels:
+        px, py = ax.transData.transform((x, y))
+        boxes.append((px - m, py - h / 2, 2 * m))
     for x, y, text, colour in sorted(labels, key=lambda v: (v[1], v[0]), reverse=True):
         px, py = ax.transData.transform((x, y))
         w = 0.56 * fontsize * pt * len(text)
-        for k in (0, -1, 1, -2, 2, -3, 3, -4, 4, -5, 5, -6, 6, -8, 8):
-            x0, y0 = px + 4 * pt, py + k * h - 0.3 * h
-            if not any(x0 < bx + bw and bx < x0 + w and y0 < by + h and by < y0 + h
-                       for bx, by, bw in boxes):
+        x0, best = px + m + pt, None  # best: (overlaps, k) of the least crowded place
+        for k in (0, -1, 1, -2, 2, -3, 3, -4, 4, -5, 5, -6, 6, -7, 7, -8, 8, -10, 10, -12, 12,
+                  -14, 14, -16, 16):
+            y0 = py + k * h - 0.3 * h
+            if not (inside.y0 <= y0 and y0 + h <= inside.y1):
+                continue
+            hits = sum(x0 < bx + bw and bx < x0 + w and y0 < by + h and by < y0 + h
+                       for bx, by, bw in boxes)
+            if best is None or hits < best[0]:
+                best = (hits, k)
+            if hits == 0:
                 break
+        k = 0 if best is None else best[1]
+        y0 = py + k * h - 0.3 * h
         boxes.append((x0, y0, w))
-        ax.annotate(text, (x, y), xytext=(4, k * h / pt), textcoords="offset points",
+        ax.annotate(text, (x, y), xytext=((x0 - px) / pt, k * h / pt), textcoords="offset points",
                     fontsize=fontsize, color=colour, va="center",
                     arrowprops=None if k == 0 else dict(arrowstyle="-", lw=0.4,
                                                          color=colour, alpha=0.6))
@@ -157,19 +178,20 @@ def render_kernel_pareto(rows, path, title: str = "") -> None:
     fig, axes = plt.subplots(1, 2, figsize=(15, 6.2), constrained_layout=True)
     colours = {"ideal": "tab:grey", "filtered": "tab:blue", "improved": "tab:red"}
     for ax, metric in zip(axes, ("mean", "p95")):
+        labels = []  # placed once the scales are set, stepped apart where they would overlap
         for g, c in colours.items():
             sel = [r for r in rows if r["group"] == g]
             ax.scatter([r["us_per_point"] for r in sel], [r[metric] for r in sel], color=c,
                        label=g, s=40, zorder=3)
-            for r in sel:
-                ax.annotate(r["path"].replace("filtered K29", "K29"), (r["us_per_point"],
-                            r[metric]), fontsize=7, xytext=(4, 2), textcoords="offset points")
+            labels += [(r["us_per_point"], r[metric], r["path"].replace("filtered K29", "K29"),
+                        "k") for r in sel]
         t = np.array([r["us_per_point"] for r in rows])
         e = np.array([r[metric] for r in rows])
         f = pareto_front(t, e)
         ax.step(t[f], e[f], where="post", color="k", lw=1, alpha=0.6, label="Pareto front")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        _place_labels(ax, labels, fontsize=7)
         ax.set_xlabel("warm cost per shading point, float32, CPU (µs, median, interleaved)")
         ax.set_ylabel(f"CIEDE2000 ΔE vs reference, {metric} over the wide grid")
         ax.grid(True, which="both", alpha=0.3)

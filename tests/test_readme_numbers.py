@@ -54,7 +54,8 @@ FIGURES = ROOT / "figures"
 PAGES = ("studies/figure7.md", "studies/ibl.md", "studies/improved.md",
          "studies/classic-models.md", "theory/accuracy.md", "studies/fitting.md",
          "studies/error-runtime.md", "studies/performance.md", "how-to/devices.md",
-         "studies/scaling.md", "getting-started/conventions.md", "studies/photographs.md")
+         "studies/scaling.md", "getting-started/conventions.md", "studies/photographs.md",
+         "getting-started/methods.md")
 _MARK = re.compile(r"\n\n<!-- page: (\S+) -->\n\n")
 
 
@@ -693,6 +694,9 @@ _EVR = {  # README row of the error-vs-run-time table -> bench.json row paths
     "patch: Monte Carlo 10³ / 10⁴ / 10⁵ samples": [f"Monte Carlo 1e+0{k}" for k in (3, 4, 5)],
     "patch: `ideal` / `filtered` / `filtered_gt_moments` / `filtered_gt_opd`":
         ["ideal", "filtered", "filtered_gt_moments", "filtered_gt_opd"],
+    "patch: `improved` fast / default / accurate, `khr`":
+        ["improved fast (K=2)", "improved default (K=3)",
+         "improved accurate (K=3, 3 reads a bin: under uniform light = K=3)", "khr"],
     "real-time kernel (f32): ideal M = 2 / K 29 with LUT / K 29 with Gaussian Ŝ":
         ["kernel ideal M=2 f32", "kernel K29 LUT f32", "kernel K29 Gaussian Ŝ f32"],
 }
@@ -778,8 +782,11 @@ def _ibl_sphere_row() -> dict:
 
 
 def _bench_load():
-    return [artifact("bench.json")["environment"]["cpu_count"],
-            artifact("bench.json")["environment"]["load_average"][0]]
+    """CPUs and load of the run behind the peers, specialisation and stability sections (the
+    error-vs-run-time rows may have been rerun alone since: "environment" is theirs)."""
+    b = artifact("bench.json")
+    env = b.get("environment_other_sections", b["environment"])
+    return [env["cpu_count"], env["load_average"][0]]
 
 
 def _presets_rows():
@@ -792,7 +799,25 @@ def _presets_rows():
             for label, k in names.items()}
 
 
+def _method_cost(*names):
+    """× `filtered` of rows `names` of method_cost.json (a method, or "improved <preset>")."""
+    rows = {r["name"]: r for r in artifact("method_cost.json")["rows"]}
+    return [rows[n]["x_filtered"] for n in names]
+
+
 SPECS = [
+    Sentence(r"`improved` costs \*\*(\S+)×\*\* `filtered` a shading point with "
+             r"`ModelOptions.preset\(\"fast\"\)` \(K = 2\), \*\*(\S+)×\*\* with the default "
+             r"\(K = 3\) and \*\*(\S+)×\*\* with `preset\(\"accurate\"\)` \(three reads a bin\); "
+             r"`ideal` (\S+)×, `khr` (\S+)×; `colour_table` (\S+)× `filtered` on the same points "
+             r"of one film at one α \(its table's build apart\); the float64 references are "
+             r"10⁴–10⁶ times slower \(`reference` (\S+)×, `mc` (\S+)×\)", ("method_cost.json",),
+             lambda: _method_cost("improved fast", "improved default", "improved accurate",
+                                  "ideal", "khr", "colour_table", "reference", "mc")),
+    Sentence(r"`colour_table` \(one film\) \| (\S+) / (\S+) / (\S+); (\S+); (\S+); (\S+) \|",
+             ("method_cost.json",),
+             lambda: _method_cost("improved fast", "improved default", "improved accurate",
+                                  "ideal", "khr", "colour_table")),
     Table("| method | ns a point | × `filtered` | first call (compiles) |",
           ("presets_bench.json",), 1, _presets_rows),
     Table("| row | method | ΔE₀₀ mean |", ("figure7.json",), 2, _fig7_rows),
@@ -851,6 +876,9 @@ SPECS = [
              r"at a load average of (\S+) from other jobs at the start of the run",
              ("bench.json",), _bench_load),
     Table("| path | ΔE₀₀ p95 | ΔE₀₀ max | µs / evaluation |", ("bench.json",), 1, _evr_rows),
+    Sentence(r"These rows ran on the (\d+)-core CPU at a load average of (\S+) at their start",
+             ("bench.json",), lambda: [artifact("bench.json")["environment"]["cpu_count"],
+                                       artifact("bench.json")["environment"]["load_average"][0]]),
     Sentence(r"no small M converges; below 80° ΔE max < 1 needs M = (\d+) \(tabulated Ŝ\)",
              ("bench.json",), lambda: [artifact("bench.json")["m_selection"]["exact"][
                  "smallest_M_dE_max_below_1_theta_le_80deg"]]),

@@ -6,11 +6,30 @@ import jax
 import numpy as np
 
 from benchmarks import bench, pareto
+from thinfilm_jax.core import methods
 
 
 def test_bench_tiny(tmp_path, capsys):
-    result = bench.run_bench(out=tmp_path, config=bench.BenchConfig.tiny(), verbose=True)
+    # a method registered at run time gets its row in panel (b), beside every uniform-light
+    # method of the registry (read from the registry, not a list in the bench)
+    extra = methods.Method("ideal_again", ("patch",), False, "exact", True,
+                           "the ideal method under another name (test)",
+                           impl=methods.implementation("ideal"))
+    methods.register(extra)
+    try:
+        result = bench.run_bench(out=tmp_path, config=bench.BenchConfig.tiny(), verbose=True)
+    finally:
+        methods.unregister("ideal_again")
     data = json.loads((tmp_path / "bench.json").read_text())
+    panel_b = {r["knobs"].get("method") for r in data["rows"] if r["family"] == "b: patch"}
+    assert "ideal_again" in panel_b
+    assert set(methods.names("patch", exact=False)) <= panel_b
+    assert {"improved", "khr"} <= panel_b
+    # the registry's methods without a point in (b) are named, with why, in the report
+    md = (tmp_path / "error_vs_runtime.md").read_text()
+    assert set(data["panel_b_absent"]) == (set(methods.names("envmap"))
+                                           - set(methods.names("patch")))
+    assert "`colour_table`: no uniform-light form" in md
     assert (tmp_path / "error_vs_runtime.png").stat().st_size > 0
     assert (tmp_path / "error_vs_runtime.md").exists()
     assert data["environment"]["devices"] == [str(d) for d in jax.devices()]
@@ -83,3 +102,27 @@ def test_bins_cost_tiny():
                                       "improved K=3 + spread"} | {
                                           f"improved {k}" for k in READS_VARIANTS}
     assert all(v > 0 for v in r["ns_per_point"].values())
+
+
+def test_method_cost_rows_follow_the_registry():
+    """The cost table (`benchmarks.method_cost`) times every real-time `envmap_radiance`
+    method of the registry as it stands, a method registered at run time included, and
+    `improved` once per named preset (no timing here)."""
+    from benchmarks.method_cost import method_programs
+    from thinfilm_jax import ModelOptions
+
+    methods.register(methods.Method("filtered_again", ("envmap",), False, "bands", False,
+                                    "filtered under another name (test)",
+                                    impl=methods.implementation("filtered")))
+    try:
+        progs = method_programs()
+    finally:
+        methods.unregister("filtered_again")
+    assert "filtered_again" in progs
+    realtime = {m for m in methods.names("envmap")
+                if methods.implementation(m).envmap_kind == "realtime"}
+    assert {m for m, _, _ in progs.values()} == realtime | {"filtered_again"}
+    for p in ("fast", "default", "accurate"):
+        m, preset, opts = progs[f"improved {p}"]
+        q = ModelOptions.preset(p)
+        assert (m, preset, opts.bins, opts.bin_reads) == ("improved", p, q.bins, q.bin_reads)

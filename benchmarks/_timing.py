@@ -166,7 +166,7 @@ def jsonable(x):
 def write_report(out, stem: str, result: dict, markdown: Callable[[dict], str]) -> str:
     """Write a study's `result` as ``out/<stem>.json`` (`jsonable`) and its `markdown`
     rendering as ``out/<stem>.md``, each atomically (`out` created); returns the markdown."""
-    from thinfilm_jax.core._io import atomic_write, write_json
+    from thinfilm_jax.core.files import atomic_write, write_json
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import jax
 
-from thinfilm_jax.core._io import atomic_write, write_json
+from thinfilm_jax.core.files import atomic_write, write_json
 from ._common import MATERIALS, BenchConfig
 from ._timing import environment, fmt, jsonable, log
 from .error_runtime import absent_from_patches, bench_patches, bench_shading

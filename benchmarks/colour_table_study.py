@@ -46,7 +46,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from thinfilm_jax.core._io import atomic_write, write_json
+from thinfilm_jax.core.files import atomic_write, write_json
 from thinfilm_jax.brdf.carpaint import PAINTS
 from thinfilm_jax.core.film import Film
 from thinfilm_jax.shading.colour_table import (colour_table_radiance, decomposition_error,

@@ -36,7 +36,7 @@ import time
 import jax
 import numpy as np
 
-from thinfilm_jax.core._io import write_json
+from thinfilm_jax.core.files import write_json
 from thinfilm_jax.core.film import Film
 from thinfilm_jax.fit.film_fit import FitOptions, fit_film
 from thinfilm_jax.shading.patch import patch_radiance
@@ -188,7 +188,7 @@ def _tick(progress, what, i, n, t0, out, result):
 
 
 def plot(result, path):
-    from thinfilm_jax.core._io import atomic_write
+    from thinfilm_jax.core.files import atomic_write
     from thinfilm_jax.render import plot as plt  # the caller's backend untouched
 
     methods = [m for m in result["coverage"]]

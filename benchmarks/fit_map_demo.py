@@ -62,7 +62,7 @@ def run(resolution: int = 64, out: str | Path = "figures", seed: int = 0) -> dic
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
-    from thinfilm_jax.core._io import write_json
+    from thinfilm_jax.core.files import write_json
     from thinfilm_jax.core.film import Film
     from thinfilm_jax.fit.thickness_map import fit_patch_map, render_patch_map
 
@@ -113,7 +113,7 @@ def run_envmap(resolution: int = 48, out: str | Path = "figures", seed: int = 0,
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
-    from thinfilm_jax.core._io import write_json
+    from thinfilm_jax.core.files import write_json
     from thinfilm_jax.shading.envmap import load_envmap
     from thinfilm_jax.core.film import Film
     from thinfilm_jax.fit.thickness_map import fit_envmap_map
@@ -187,7 +187,7 @@ def _load():
 def _figure(path, image, d, runs, summary, title, xlabel):
     import matplotlib
 
-    from thinfilm_jax.core._io import atomic_write
+    from thinfilm_jax.core.files import atomic_write
     from thinfilm_jax.spectral.colorimetry import bands_to_srgb
     from thinfilm_jax.render import plot as plt  # the caller's backend untouched
 

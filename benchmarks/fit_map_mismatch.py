@@ -95,7 +95,7 @@ def report(rows: dict) -> str:
 
 
 def main(argv=None) -> int:
-    from thinfilm_jax.core._io import atomic_write, write_json
+    from thinfilm_jax.core.files import atomic_write, write_json
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--resolution", type=int, default=24)

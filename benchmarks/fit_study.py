@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from thinfilm_jax.core._io import write_json
+from thinfilm_jax.core.files import write_json
 from thinfilm_jax.optics.airy import airy_reflectance
 from thinfilm_jax.core.film import Film
 from thinfilm_jax.fit.film_fit import FitOptions, fit_film, fit_spectrum, patch_model, spectrum_model

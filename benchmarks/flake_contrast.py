@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from thinfilm_jax.core._io import atomic_write
+from thinfilm_jax.core.files import atomic_write
 from thinfilm_jax.core.stack import Stack
 from thinfilm_jax.optics.materials import MONOLAYER_NM, refractive_index
 from thinfilm_jax.optics.objective import objective_reflectance

@@ -52,7 +52,7 @@ _SUMMARY = re.compile(r"^=*\s*(?P<body>(\d+ \w+(, )?)+).* in (?P<t>[\d.]+)s", re
 
 
 def _write(report: dict, out: Path) -> None:
-    from thinfilm_jax.core._io import write_json
+    from thinfilm_jax.core.files import write_json
 
     write_json(out / "gpu_check.json", report)
 

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from thinfilm_jax.core._io import atomic_write, write_json
+from thinfilm_jax.core.files import atomic_write, write_json
 from thinfilm_jax.spectral.colorimetry import delta_e2000
 from thinfilm_jax.shading.envmap import SHIPPED, load_envmap
 from thinfilm_jax.core.film import Film

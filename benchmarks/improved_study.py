@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from thinfilm_jax.core._io import atomic_write, write_json
+from thinfilm_jax.core.files import atomic_write, write_json
 from thinfilm_jax.spectral.colorimetry import delta_e2000
 from thinfilm_jax.realtime.improved import bin_table, improved_kernel
 from thinfilm_jax.realtime.kernels import filtered_kernel, ideal_kernel
@@ -347,7 +347,9 @@ def ibl_floor(indices=(0, 1, 2, 3, 4, 7), npz="figures/ibl_render.npz", verbose=
     `render.scene_setups()`: by default fig4 under the four maps and fig3 at α = 0.05, 0.6."""
     from thinfilm_jax.spectral.colorimetry import bands_to_xyz
     from thinfilm_jax.shading.envmap import load_envmap
-    from thinfilm_jax.shading.ibl import _interp, _lobe_cos_weight, _r_table, auto_subdivisions, texel_nodes
+    from thinfilm_jax.shading.ibl_integrand import (interp_table, lobe_cos_weight,
+                                                    reflectance_table, texel_nodes)
+    from thinfilm_jax.shading.ibl_reference import auto_subdivisions
     from thinfilm_jax.realtime.improved import lookup_lobe
     from thinfilm_jax.shading.prefilter import lookup_albedo, lookup_prefiltered, prefilter_envmap
     from thinfilm_jax.spectral.uplift import cross_band_name
@@ -372,11 +374,11 @@ def ibl_floor(indices=(0, 1, 2, 3, 4, 7), npz="figures/ibl_render.npz", verbose=
         d, wt, idx = texel_nodes(*env.shape, auto_subdivisions(env.shape[0], alpha))
         dirs = jnp.asarray(d)
         light = jnp.asarray(wt)[:, None] * jnp.asarray(env.radiance).reshape(-1, 3)[idx]
-        table = _r_table(jax.tree.map(jnp.asarray, film), obs, 1024, "complex", jnp.float64)
+        table = reflectance_table(jax.tree.map(jnp.asarray, film), obs, 1024, "complex", jnp.float64)
 
         def one(nn, wo=jnp.asarray(wo), dirs=dirs, light=light, table=table, alpha=alpha):
-            w, c = _lobe_cos_weight(dirs, nn, wo, alpha)
-            r = _interp(table, c).reshape(-1, 3, 3)
+            w, c = lobe_cos_weight(dirs, nn, wo, alpha)
+            r = interp_table(table, c).reshape(-1, 3, 3)
             lw = w[:, None] * light
             return jnp.einsum("njk,nk->jk", r, lw, precision=jax.lax.Precision.HIGHEST), \
                 lw.sum(0)

@@ -41,7 +41,7 @@ def _save(fig, path):
     """Lay out `fig`, write it atomically as a PNG at `path` and close it."""
     from pathlib import Path
 
-    from thinfilm_jax.core._io import atomic_write
+    from thinfilm_jax.core.files import atomic_write
 
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)

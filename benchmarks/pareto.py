@@ -8,7 +8,7 @@ import textwrap
 
 import numpy as np
 
-from thinfilm_jax.core._io import atomic_write
+from thinfilm_jax.core.files import atomic_write
 from ._timing import fmt
 
 ERROR_FLOOR = 1e-6  # ΔE below this (the references: 0) is drawn on the floor of the log plot

@@ -519,7 +519,7 @@ def plot(res: dict, scenes: dict, fits: dict, path: str):
     ambiguity mask; last row: the spectrum fits against optifik."""
     from matplotlib.colors import ListedColormap
 
-    from thinfilm_jax.core._io import atomic_write
+    from thinfilm_jax.core.files import atomic_write
     from thinfilm_jax.render import plot as plt  # the caller's backend untouched
 
     by = {r["key"]: r for r in res["rows"]}

@@ -74,7 +74,7 @@ def run(points: int = 1 << 20, repeats: int = 5) -> dict:
 
 
 def main(argv=None) -> int:
-    from thinfilm_jax.core._io import write_json
+    from thinfilm_jax.core.files import write_json
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=1 << 20)

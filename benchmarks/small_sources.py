@@ -479,7 +479,7 @@ def diagnose(name: str, cfg: Config, verbose=True, nh: int = 2048) -> list[dict]
     from thinfilm_jax.realtime.improved import bin_bands, bin_table, lookup_bins
     from thinfilm_jax.shading.envmap import downsample
     from thinfilm_jax.shading.ibl import DEFAULT_SOURCES
-    from thinfilm_jax.shading.ibl_integrand import _lobe_cos_weight, texel_nodes
+    from thinfilm_jax.shading.ibl_integrand import lobe_cos_weight, texel_nodes
     from thinfilm_jax.shading.ibl_reference import resample_factor
     from thinfilm_jax.shading.prefilter import bin_radiance, lookup_albedo, prefilter_envmap
     from thinfilm_jax.spectral.colorimetry import delta_e2000
@@ -506,7 +506,7 @@ def diagnose(name: str, cfg: Config, verbose=True, nh: int = 2048) -> list[dict]
         woj = jnp.asarray(wo)
 
         def one(nn, dirs=dirs, wtj=wtj, light=light, woj=woj, alpha=alpha):
-            w, c = _lobe_cos_weight(dirs, nn, woj, alpha)
+            w, c = lobe_cos_weight(dirs, nn, woj, alpha)
             w = w * wtj
             cell = jnp.clip((c * nh).astype(jnp.int32), 0, nh - 1)
             cdf = jnp.cumsum(jnp.zeros(nh, w.dtype).at[cell].add(w)) / jnp.sum(w)
@@ -676,7 +676,7 @@ def bins_markdown(result) -> str:
 
 
 def plot_maps(path, names):
-    from thinfilm_jax.core._io import atomic_write
+    from thinfilm_jax.core.files import atomic_write
     from thinfilm_jax.render import plot as plt  # the caller's backend untouched
 
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.3 * len(names)),

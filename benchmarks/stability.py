@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from thinfilm_jax.core._io import atomic_write
+from thinfilm_jax.core.files import atomic_write
 from thinfilm_jax.optics.airy import airy_reflectance
 from thinfilm_jax.core.film import Film
 from thinfilm_jax.realtime.filtered import filtered_bands

@@ -16,7 +16,6 @@ SKIP = {"thinfilm_jax.__main__"}
 # at least one (the public API — the package itself, every core module, the CLI parsers — and
 # each study with a function of its own contract: peers, stiff, stability, figure7, render, …)
 NO_EXAMPLES = {
-    "thinfilm_jax.core._io": "private: the atomic file writes of the drivers, no user API",
     "thinfilm_jax.cli._checks": "private: the CLI's range checks of parsed options "
                                 "(tests/cli/test_cli_robustness.py runs them through the CLI)",
     "benchmarks": "a package docstring only: it defines nothing",

@@ -144,17 +144,7 @@ def test_tests_mirror_the_layers():
 
 #: the private names of the library the studies still import, each with why: a new one is an
 #: error here (make the library offer a public function instead), a fixed one must be removed
-PRIVATE_IMPORTS = {
-    # file output (atomic writes, JSON with the library's number format): core's, not public
-    "thinfilm_jax.core._io": "atomic_write, write_json: the studies write their files as the "
-                             "library does",
-    # the exact IBL's per-texel integrand, timed and ablated piece by piece (improved_study,
-    # small_sources): no public counterpart
-    "thinfilm_jax.shading.ibl._interp": "improved_study's per-bin exact light",
-    "thinfilm_jax.shading.ibl._lobe_cos_weight": "improved_study's per-bin exact light",
-    "thinfilm_jax.shading.ibl._r_table": "improved_study's per-bin exact light",
-    "thinfilm_jax.shading.ibl_integrand._lobe_cos_weight": "small_sources' per-bin exact light",
-}
+PRIVATE_IMPORTS: dict[str, str] = {}
 
 
 def _private_imports(path: Path):
@@ -206,11 +196,11 @@ def test_benchmarks_import_public_names():
 def test_private_import_scan_sees_one(tmp_path):
     """The scan finds a private module, a private name and ignores public ones."""
     mod = tmp_path / "m.py"
-    mod.write_text("from thinfilm_jax.core._io import write_json\n"
-                   "from thinfilm_jax.shading.ibl import _r_table, envmap_radiance\n"
+    mod.write_text("from thinfilm_jax.core._validate import checked\n"
+                   "from thinfilm_jax.shading.ibl import _batch, envmap_radiance\n"
                    "import numpy as _np\nfrom thinfilm_jax import Film\n")
-    assert list(_private_imports(mod)) == ["thinfilm_jax.core._io",
-                                           "thinfilm_jax.shading.ibl._r_table"]
+    assert list(_private_imports(mod)) == ["thinfilm_jax.core._validate",
+                                           "thinfilm_jax.shading.ibl._batch"]
 
 
 def test_modules_and_functions_read_in_one_sitting():

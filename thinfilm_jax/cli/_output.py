@@ -24,7 +24,7 @@ import numpy as np
 def save_thickness_png(path: Path, d: np.ndarray, title: str, ambiguous=None) -> None:
     """The thickness map `d` (nm) as a PNG with a colour bar, pixels flagged in `ambiguous`
     hatched (`fit-map` of an image and of a photograph), written atomically."""
-    from ..core._io import atomic_write
+    from ..core.files import atomic_write
     from ..render import plot as plt  # the caller's backend untouched
 
     h, w = d.shape

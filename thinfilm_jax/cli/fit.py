@@ -370,7 +370,7 @@ def run_fit_cli(args) -> int:
     for note in obs.get(NOTES, ()):
         print(f"{path.name}: {note}")
 
-    from ..core._io import write_json
+    from ..core.files import write_json
     from ..fit.film_fit import FitOptions, fit_film, fit_spectrum
 
     try:

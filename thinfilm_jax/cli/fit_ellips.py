@@ -113,7 +113,7 @@ def _material(args):
 
 def run_fit_ellips_cli(args) -> int:
     """Entry point of ``thinfilm-jax fit-ellips``: read, fit, write the JSON, print a summary."""
-    from ..core._io import write_json
+    from ..core.files import write_json
     from ..core.ellipsometry_data import read_ellipsometry
     from ..fit.ellipsometry_fit import fit_ellipsometry
     from ..fit.options import material_dict

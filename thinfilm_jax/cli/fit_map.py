@@ -315,7 +315,7 @@ def run_fit_map_cli(args) -> int:
     loss = np.asarray(res.loss)
     rms = np.sqrt(2 * loss / 3)  # per-band RMS residual in units of σ
 
-    from ..core._io import atomic_write, write_json
+    from ..core.files import atomic_write, write_json
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / "thickness_map.npy", lambda tmp: np.save(tmp, d))

@@ -113,7 +113,7 @@ def _illuminant(text: str):
 def _save_exr(path: Path, maps) -> None:
     import OpenImageIO as oiio
 
-    from ..core._io import atomic_write
+    from ..core.files import atomic_write
 
     data = np.ascontiguousarray(np.stack(maps, axis=-1).astype(np.float32))
 
@@ -177,7 +177,7 @@ def run_photo(args) -> int:
     print(f"read {res.encoding}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    from ..core._io import atomic_write, write_json
+    from ..core.files import atomic_write, write_json
 
     d, se, amb = res.thickness, res.stderr, res.ambiguous
     for name, a in (("thickness", d), ("stderr", se), ("ambiguous", amb)):

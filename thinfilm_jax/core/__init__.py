@@ -1,7 +1,7 @@
 """Layer 0, what every other layer stands on: the `Film` and `Stack` pytrees (`film`,
 `stack`), what the exact paths take and how it is batched (`material`), the registry of
 methods and what each models (`methods`), the checks at the public boundary (`_validate`),
-atomic file writes (`_io`), JAX's persistent compilation cache (`compilation_cache`) and the
+atomic file writes (`files`), JAX's persistent compilation cache (`compilation_cache`) and the
 batch sharding over devices (`sharding`). Imports nothing else of the package."""
 
 from ._validate import checked
@@ -9,6 +9,7 @@ from . import (
     compilation_cache,
     ellipsometry_data,
     film,
+    files,
     image,
     material,
     methods,
@@ -19,6 +20,7 @@ from . import (
 from .compilation_cache import *  # noqa: F403 (its __all__)
 from .ellipsometry_data import *  # noqa: F403 (its __all__)
 from .film import *  # noqa: F403 (its __all__)
+from .files import *  # noqa: F403 (its __all__)
 from .image import *  # noqa: F403 (its __all__)
 from .material import *  # noqa: F403 (its __all__)
 from .methods import *  # noqa: F403 (its __all__)
@@ -32,6 +34,7 @@ __all__ = [
     *compilation_cache.__all__,
     *ellipsometry_data.__all__,
     *film.__all__,
+    *files.__all__,
     *image.__all__,
     *material.__all__,
     *methods.__all__,

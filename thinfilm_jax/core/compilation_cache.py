@@ -70,7 +70,7 @@ def cached_host_tables(name: str, key: tuple, sources: tuple, compute):
 
     import numpy as np
 
-    from ._io import atomic_write
+    from .files import atomic_write
 
     folder = jax.config.jax_compilation_cache_dir
     if not folder:

@@ -66,7 +66,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core import _validate as V
-from ..core._io import atomic_write
+from ..core.files import atomic_write
 from ..core.film import Film
 from ..optics.index import is_index_model
 

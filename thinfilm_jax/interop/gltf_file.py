@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import _validate as V
-from ..core._io import atomic_write, write_json
+from ..core.files import atomic_write, write_json
 from ..core.film import Film
 from .gltf import (EXTENSION, INDEX_WAVELENGTH_NM, IOR_EXTENSION, _extras, _mapping,
                    constant_film, film_from_gltf, film_to_gltf, read_texture_channel,

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core._io import atomic_write, write_json
+from ..core.files import atomic_write, write_json
 from ..optics.airy import choose_arithmetic
 from ..spectral.colorimetry import bands_to_srgb, delta_e2000
 from ..core.film import Film

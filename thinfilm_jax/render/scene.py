@@ -84,7 +84,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core._io import atomic_write, write_json
+from ..core.files import atomic_write, write_json
 from ..core.film import Film
 from ..core.methods import METHODS as METHOD_INFO
 from ..optics.materials import MATERIALS

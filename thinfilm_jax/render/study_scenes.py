@@ -55,7 +55,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from ..core._io import atomic_write, write_json
+from ..core.files import atomic_write, write_json
 from ..optics.airy import choose_arithmetic
 from ..spectral.colorimetry import bands_to_srgb, bands_to_xyz, delta_e2000
 from ..spectral.spectra import DEFAULT_OBSERVER

@@ -83,7 +83,7 @@ from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS
 from ..spectral.uplift import cross_band_name
 from .envmap import (EnvMap, downsample, load_envmap, lookup_bilinear, texel_centers,
                      texel_solid_angles)
-from .ibl_integrand import _interp, _local_frame, _lobe_cos_weight, _r_table, texel_nodes
+from .ibl_integrand import interp_table, _local_frame, lobe_cos_weight, reflectance_table, texel_nodes
 from ..realtime.improved import bin_table
 from .prefilter import bin_radiance, filter_level, level_source
 
@@ -233,8 +233,8 @@ def configurations(omega_r, cos_o, n_azimuth: int):
 def _film_point(material, n, wo, dirs):
     """Film on GGX: f_b⟨n,ω_i⟩ = ρ̃⟨n,ω_i⟩ (chunk, N), colour R_jk(⟨h,ω_i⟩) (chunk, N, J, K)."""
     alpha, r_table = material
-    f, c = _lobe_cos_weight(dirs, n, wo, alpha)
-    r = _interp(r_table, c)
+    f, c = lobe_cos_weight(dirs, n, wo, alpha)
+    r = interp_table(r_table, c)
     return f, r.reshape(r.shape[:-1] + (-1, 3))
 
 
@@ -299,7 +299,7 @@ def _integrand(material, alpha: float, env: EnvMap, subdivisions, observer, n_co
         point, mat = _paint_point, CarPaint(*(jnp.asarray(x, dt) for x in material))
     else:
         film = jax.tree.map(lambda x: jnp.asarray(x, dt), material)
-        r_tab = _r_table(film, cross_band_name(observer), n_cos,
+        r_tab = reflectance_table(film, cross_band_name(observer), n_cos,
                          choose_arithmetic(film, "auto"), dt)
         point, mat = _film_point, (jnp.asarray(alpha, dt), r_tab)
     return point, mat, jnp.asarray(d, dt), jnp.asarray(wgt, dt), light

@@ -178,7 +178,7 @@ def save_envmap(path, envmap) -> Path:
     """Write an `EnvMap` (or array) to `path` with OpenImageIO (format from the suffix), atomically."""
     import OpenImageIO as oiio
 
-    from ..core._io import atomic_write
+    from ..core.files import atomic_write
 
     arr = np.ascontiguousarray(np.asarray(getattr(envmap, "radiance", envmap), np.float32))
 

@@ -70,7 +70,6 @@ from .carpaint_ibl import PAINT_ENVMAP_METHODS as PAINT_METHODS
 from .carpaint_ibl import paint_envmap_radiance
 from .colour_table import ColourTable
 from .envmap import EnvMap, load_envmap
-from .ibl_integrand import _interp, _lobe_cos_weight, _r_table, texel_nodes  # noqa: F401 (re-exported)
 from .ibl_reference import auto_subdivisions, exact_radiance  # noqa: F401 (re-exported)
 from .material_ibl import MATERIAL_ENVMAP_METHODS as MATERIAL_METHODS
 from .material_ibl import material_envmap_radiance

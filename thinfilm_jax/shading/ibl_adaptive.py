@@ -72,8 +72,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .envmap import texel_solid_angles
-from .ibl_integrand import (HIGHEST, _contract, _interp, _lobe_cos_weight, _lobe_terms, _per_row,
-                            _r_table, sub_nodes)
+from .ibl_integrand import (HIGHEST, _contract, interp_table, lobe_cos_weight, _lobe_terms, _per_row,
+                            reflectance_table, sub_nodes)
 from ..core.material import first_point, point_split
 from ..brdf.microfacet import smith_g2
 from ..spectral.uplift import cross_band_name
@@ -339,7 +339,7 @@ def _adaptive_point(table, a, n, wo, geo, rad, cfg):
     (centre, nb, sin_r, size, wts, eff, mass), texels, sub = geo
 
     def g_of(terms):  # g = ρ̃⟨n,ω⟩ R_jk(⟨h,ω⟩) (…, J·3)
-        return terms[0][..., None] * _interp(table, terms[1])
+        return terms[0][..., None] * interp_table(table, terms[1])
 
     # level 1: the block rule at the block centres, by parts over the whole map
     t1 = _lobe_terms(centre[:-1], n, wo, a)
@@ -405,9 +405,9 @@ def _adaptive_point(table, a, n, wo, geo, rad, cfg):
     stt = jnp.sqrt(jnp.maximum(1 - u[r] ** 2, 0.0))  # (K₃, s)
     d = jnp.stack([stt[:, :, None] * cphi[col][:, None, :], stt[:, :, None] * sphi[col][:, None, :],
                    jnp.broadcast_to(u[r][:, :, None], stt.shape + (s,))], -1)
-    wf, cf = _lobe_cos_weight(d.reshape(-1, s * s, 3), n, wo, a)
+    wf, cf = lobe_cos_weight(d.reshape(-1, s * s, 3), n, wo, a)
     wq = (wu[r][:, :, None] * wphi[None, None, :]).reshape(-1, s * s)
-    fine = _per_row(_interp(table, cf), (wq * wf)[..., None] * rad[ti][:, None, :], cross)
+    fine = _per_row(interp_table(table, cf), (wq * wf)[..., None] * rad[ti][:, None, :], cross)
     d3, est3 = _correction(fine, coarse_of(q), top, score2)
     return total + d3, est2 + est3
 
@@ -422,12 +422,12 @@ def _adaptive_jit(film, alpha, normal, view, radiance, geo, extra, cfg):
     mat, point = point_split(film, shape)
     flat = (mat, alpha.reshape(-1), normal.reshape(-1, 3), view.reshape(-1, 3))
     rad = jnp.concatenate([radiance.reshape(-1, 3), jnp.zeros((1, 3), dtype)])
-    shared = (_r_table(point(first_point(mat)), obs, n_cos, arithmetic, dtype)
+    shared = (reflectance_table(point(first_point(mat)), obs, n_cos, arithmetic, dtype)
               if one_film else None)
 
     def one(xs):
         m, a, n, wo = xs
-        table = shared if one_film else _r_table(point(m), obs, n_cos, arithmetic, dtype)
+        table = shared if one_film else reflectance_table(point(m), obs, n_cos, arithmetic, dtype)
         return _adaptive_point(table, a, n, wo, geo, rad, (s, counts, cross))
 
     n = flat[1].shape[0]

@@ -2,7 +2,7 @@ r"""The integrand of the exact IBL paths (SPEC §9), g = ρ̃(ω_i, ω_o)⟨n,ω
 
 The GGX factors of a light direction (`_lobe_terms`: one formula for every node of the
 reference, the scores of its adaptive rule included), the film's exact R_jk(cos θ₁) table
-and its linear read (`_r_table`, `_interp`), GGX visible-normal sampling (Heitz 2018,
+and its linear read (`reflectance_table`, `interp_table`), GGX visible-normal sampling (Heitz 2018,
 `_vndf_sample`), the per-point contractions over nodes and light channels, and the host
 tables of the texel quadrature (Gauss–Legendre sub-nodes of every texel: `sub_nodes`,
 `texel_nodes`). `ibl_reference` (the exhaustive rule, Monte Carlo), `ibl_adaptive`,
@@ -28,7 +28,8 @@ from ..core.material import expand_batch
 from ..brdf.microfacet import normal_distribution, smith_g2
 from ..spectral.reflectance import spectral_bands
 
-__all__ = ["HIGHEST", "sub_nodes", "texel_nodes"]
+__all__ = ["HIGHEST", "sub_nodes", "texel_nodes", "lobe_cos_weight", "reflectance_table",
+           "interp_table"]
 
 HIGHEST = jax.lax.Precision.HIGHEST
 
@@ -94,18 +95,21 @@ def _lobe_terms(wi, n, wo, alpha):
     return f, c, ci, ch, dist, cos_, okh
 
 
-def _lobe_cos_weight(wi, n, wo, alpha):
+def lobe_cos_weight(wi, n, wo, alpha):
     """(ρ̃ ⟨n,ω_i⟩ (…), c = ⟨h, ω_i⟩) for world directions; 0 below either horizon."""
     return _lobe_terms(wi, n, wo, alpha)[:2]
 
 
-def _r_table(film, observer, n_cos, arithmetic, dtype):
-    """R_jk (or R_j) at c = linspace(0, 1, n_cos): exact spectral bands."""
+def reflectance_table(film, observer, n_cos, arithmetic, dtype):
+    """R_jk (or R_j) at c = linspace(0, 1, n_cos): the exact spectral bands of `film` over
+    cos θ, (n_cos, ..., J[, 3]), tabulated once per film for the texel rule (read with
+    `interp_table`)."""
     c = jnp.linspace(0.0, 1.0, n_cos, dtype=dtype)
     return spectral_bands(expand_batch(film), c, observer, arithmetic=arithmetic)
 
 
-def _interp(table, c):
+def interp_table(table, c):
+    """`table` (n, ...) over c = linspace(0, 1, n) read at c ∈ [0, 1], linearly."""
     n = table.shape[0]
     t = c * (n - 1)
     i0 = jnp.clip(jnp.floor(t), 0, n - 2)

@@ -73,7 +73,7 @@ from ..spectral.spectra import get_observer
 from .envmap import EnvMap, downsample, load_envmap, lookup_nearest
 from .prefilter import PrefilteredEnvMap
 from .ibl_adaptive import adaptive_radiance
-from .ibl_integrand import (HIGHEST, _contract, _interp, _local_frame, _lobe_cos_weight, _r_table,
+from .ibl_integrand import (HIGHEST, _contract, interp_table, _local_frame, lobe_cos_weight, reflectance_table,
                             _vndf_sample, texel_nodes)
 from ..core.material import expand_batch, first_point, point_split
 from ..core.stack import Stack
@@ -128,7 +128,7 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
     if not mc:  # the exhaustive texel rule: extra = its nodes
         dirs, e = extra
         # one film for every shading point: its R_jk(cos θ₁) table is built once, not per point
-        shared_table = (_r_table(point(first_point(mat)), obs, n_cos, arithmetic, dtype)
+        shared_table = (reflectance_table(point(first_point(mat)), obs, n_cos, arithmetic, dtype)
                         if one_film else None)
     else:
         keys = jax.random.split(extra, n_pts)
@@ -136,9 +136,9 @@ def _exact_jit(film, alpha, normal, view, radiance, extra, cfg):
     def one(xs):
         f, a, n, wo = point(xs[0]), xs[1], xs[2], xs[3]
         if not mc:
-            wgt, c = _lobe_cos_weight(dirs, n, wo, a)  # (N,)
-            table = shared_table if one_film else _r_table(f, obs, n_cos, arithmetic, dtype)
-            r = _interp(table, c)  # (N, J[·3])
+            wgt, c = lobe_cos_weight(dirs, n, wo, a)  # (N,)
+            table = shared_table if one_film else reflectance_table(f, obs, n_cos, arithmetic, dtype)
+            r = interp_table(table, c)  # (N, J[·3])
             light = wgt[:, None] * e  # (N, 3)
         else:
             k = xs[4]

@@ -10,7 +10,7 @@ material's bands:
   `cross_band=True` (the default): the cross-band form of SPEC §9,
   Σ_k D V ⟨n,ω_i⟩ R_jk(⟨h,ω_i⟩) c_k, with R_jk the bands of the `uplift.cross_band_name`
   observer; tabulated at `n_cos` cosines and interpolated linearly exactly as
-  `ibl_reference` does (`_r_table`, `_interp`), so that a GGX + film material with
+  `ibl_reference` does (`reflectance_table`, `interp_table`), so that a GGX + film material with
   height-correlated Smith masking reproduces `envmap_radiance(film, α, ...,
   method="reference", exhaustive=True)` to rounding (same texel nodes, same table);
   `n_cos=None` evaluates R_jk at every node instead.
@@ -61,7 +61,7 @@ from ..spectral.reflectance import spectral_bands
 from ..spectral.spectra import get_observer
 from ..spectral.uplift import cross_band_name
 from .envmap import EnvMap, load_envmap, lookup_nearest
-from .ibl_integrand import _interp, _local_frame, _r_table
+from .ibl_integrand import interp_table, _local_frame, reflectance_table
 from .ibl_reference import exact_rule
 from .material_patch import diffuse_only
 
@@ -103,7 +103,7 @@ def _point_terms(material, dirs, n, wo, t, table, cfg):
             film = jax.tree.map(lambda x: jnp.asarray(x, dirs.dtype)[..., None], f.film)
             r = spectral_bands(film, c, obs, arithmetic=arithmetic)
         else:
-            r = _interp(table, c)
+            r = interp_table(table, c)
         spec = (dv * ci)[:, None] * r
         diag = (M.brdf_value(diffuse_only(material), dirs, wo, n, t) if
                 material.diffuse.kind != "none" else None)
@@ -146,7 +146,7 @@ def _ibl_jit(material, normal, view, tangent, radiance, extra, cfg):
     flat = [x.reshape(-1, 3) for x in (normal, view, tangent)]
     table = None
     if spectral and n_cos is not None:
-        table = _r_table(material.fresnel.film, obs, n_cos, arithmetic, dtype)
+        table = reflectance_table(material.fresnel.film, obs, n_cos, arithmetic, dtype)
     pcfg = (spectral, n_cos, obs, arithmetic)
     if not mc:  # the texel quadrature: extra = its nodes and their light
         dirs, light = extra

@@ -28,7 +28,7 @@ from ...spectral.reflectance import bare_bands, stack_bands
 from ...spectral.spectra import get_observer
 from ...spectral.uplift import cross_band_name
 from ..envmap import EnvMap, load_envmap
-from ..ibl_integrand import _interp, _r_table
+from ..ibl_integrand import interp_table, reflectance_table
 from ..prefilter import PrefilteredEnvMap, lookup_albedo, lookup_radiance, prefilter_envmap
 from . import SplitSum
 
@@ -83,7 +83,7 @@ def tabulated_ideal(material, alpha, normal, view, envmap, observer, kw):
     dtype = jnp.result_type(alpha, normal, view, float)
     cross = bool(kw["cross_band"])
     obs = cross_band_name(observer) if cross else observer
-    table = _r_table(stack, obs, int(kw["n_cos"]), "complex", dtype)
+    table = reflectance_table(stack, obs, int(kw["n_cos"]), "complex", dtype)
     alpha = jnp.broadcast_to(jnp.asarray(alpha, dtype), shape)
     nv = [jnp.broadcast_to(jnp.asarray(v, dtype), shape + (3,)) for v in (normal, view)]
     return _tabulated_ideal_jit(table, alpha, *nv, pref, cross)
@@ -96,7 +96,7 @@ def _tabulated_ideal_jit(table, alpha, normal, view, pref, cross):
     co = jnp.where(up, cos_o, 1.0)
     sqa = jnp.sqrt(alpha)
     rad = lookup_radiance(pref, 2 * co[..., None] * normal - view, sqa)
-    r = _interp(table, co)
+    r = interp_table(table, co)
     if cross:
         out = jnp.sum(r.reshape(r.shape[:-1] + (-1, 3)) * rad[..., None, :], axis=-1)
     else:

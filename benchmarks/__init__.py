@@ -3,7 +3,7 @@
 A folder of the repository, beside `thinfilm_jax/` and not in its wheel: run from a clone,
 at its root (``pip install -e '.[bench,plots]'``, or ``make setup``), as ``python -m
 benchmarks.<module>``. Nothing in `thinfilm_jax` imports it; it imports the library's public
-names (tests/test_layout.py lists the few private ones left). What users run stays in the
+names only (tests/test_layout.py checks). What users run stays in the
 library: ``thinfilm-jax figure7`` and ``thinfilm-jax render`` (`thinfilm_jax.render`). One
 concern per module; the main ones:
 

@@ -88,7 +88,8 @@ def test_jpeg_full_scale_ringing_is_censored(tmp_path):
     photo = read_photo(str(path), "srgb")
     inner = np.hypot(x - 24, y - 24) < 9  # the disc less its edge pixel
     assert np.mean(photo.linear[inner, 0] >= 1.0) < 0.5  # the premise: ringing below 255
-    cens, (black, ceiling) = P._censoring(photo, lossy=True)
+    cens, (black, ceiling, floor) = P._censoring(photo, lossy=True)
+    assert floor == 0.0  # a reading is of the colour clipped at black (`photo_jpeg`)
     assert np.mean(cens[inner, 0] == 2) >= 0.9
     assert not np.any(cens[~disc & (np.hypot(x - 24, y - 24) > 12)] == 2)
     assert ceiling == pytest.approx(((239 / 255 + 0.055) / 1.055) ** 2.4, rel=1e-6)

@@ -13,7 +13,8 @@ w are the camera's weights under the light (`spectral.camera`: a white reflector
 g = exposure · white balance (3 gains, always free); and C is the identity for a known camera
 or a fitted 3 × 3 matrix (rows summing to 1) for ``camera="unknown"``. The noise ε has the
 per-pixel standard deviation σ_pc² = σ_image² + (f · o_pc)²: the decoded image's noise
-(quantisation and an Immerkær estimate, `core.image`) and a relative model floor f
+(quantisation and an Immerkær estimate, `core.image`; for a JPEG, the noise at its 2 × 2
+block scale and its 4:2:0 chroma's error, `fit.photo_jpeg`) and a relative model floor f
 (`model_floor`, the camera and light being known only so well).
 
 The fit, in the order it runs:
@@ -34,7 +35,8 @@ The fit, in the order it runs:
    χ²(d) holds a grid point: fringes are ≳ 100 nm wide) as one matrix product, and the k = 4
    lowest local minima of each pixel. Channels clipped at black or full scale are censored:
    they cost only when the model is on the wrong side of the clip (for a JPEG, the clip
-   levels sit a few codes inside, where its DCT rings a clipped channel: `_censoring`).
+   levels sit a few codes inside, where its DCT rings a clipped channel: `_censoring`; its
+   readings are of the colour clipped at black, max(g C s, 0): `fit.photo_jpeg`).
 4. **Refine.** Per pixel and candidate, fixed-step Levenberg–Marquardt (`fit.engine`) on the
    Hermite interpolant, the thickness kept in the range. The film is continuous, so the
    order is chosen by continuation (`pixelwise.grow`, as quality-guided phase unwrapping):
@@ -51,7 +53,8 @@ The fit, in the order it runs:
    are kept ≥ 0 (a photodiode's response; `photo_screen.matrix_from_pixels`).
 5. **Uncertainty.** The reduced χ² = Σ χ²_p / (2P − n_global) (3 residuals, one thickness per
    pixel). Standard errors are the linearised ones σ_d = (J^T J)^{-1/2} times the square root
-   of the robust reduced χ² below (the noise scale of the typical pixel);
+   of the robust reduced χ² below (the noise scale of the typical pixel; for a JPEG, of
+   max(1, it));
    a pixel is `ambiguous` where another local minimum at least 15 nm away (another fringe
    order) has a χ² above its own by less than 4 · max(1, robust reduced χ²) (two standard
    deviations), or than 4 χ²_p (the pixel's own misfit), where its neighbours disagree by
@@ -97,6 +100,7 @@ from . import photo_flags as PF
 from . import pixelwise as PW
 from .photo_flags import fit_notes
 from .photo_flags import reasons as flag_reasons
+from .photo_jpeg import jpeg_noise
 from .photo_light import ILLUMINATIONS, basis, fit_light
 from .photo_model import (  # noqa: F401
     _check_na,
@@ -227,7 +231,7 @@ def _censoring(photo: Photo, lossy: bool) -> tuple[np.ndarray, tuple[float, floa
                           for c in (_JPEG_BLACK_CODES, 255 - _JPEG_CEILING_CODES))
     top = photo.bit_depth is not None or photo.encoding == "srgb"
     cens = np.where(v <= black, 1, np.where(top & (v >= ceiling), 2, 0)).astype(np.int32)
-    return cens, (black, ceiling)
+    return cens, (black, ceiling, 0.0) if lossy else (black, ceiling)
 
 
 def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srgb",
@@ -296,6 +300,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
                               (theta_o, alpha, na))
     photo: Photo = read_photo(image, encoding, bit_depth=bit_depth)
     cens_img, levels = _censoring(photo, jpeg)
+    sig_jpeg = jpeg_noise(photo, ~np.any(cens_img > 0, axis=-1)) if jpeg else None
     valid = ~np.all(cens_img > 0, axis=-1)
     if mask is not None:
         valid &= read_mask(mask, valid.shape, name="mask")
@@ -303,7 +308,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
         raise ValueError("no pixel to fit: every pixel is clipped or outside the mask")
     run, regions, sig_img = _setup(photo, valid, cens_img, levels, reference, stack, layer, cam,
                                    (lo, hi), (theta_o, alpha, na), grid_step_nm, screen_step_nm,
-                                   model_floor, smoothness_nm, steps, chunk)
+                                   model_floor, smoothness_nm, steps, chunk, sig_jpeg)
     table = _table(run, cam)
     gains, cmat, cmat_se = _gains(run, photo, sig_img, cens_img, regions, table, cam.kind)
     n = run.obs.shape[0]
@@ -322,7 +327,7 @@ def fit_photo(image, template, *, camera, illuminant="D65", encoding: str = "srg
     finally:
         if run.bar is not None:
             run.bar.close()
-    sig_rep = (_noise(photo, report_floor).reshape(-1, 3)[run.where] / light[:, None]
+    sig_rep = (_noise(photo, report_floor, sig_jpeg).reshape(-1, 3)[run.where] / light[:, None]
                if report_floor != model_floor else None)
     score, loud = _score(run, fit, cam, photo, sig_rep, chi2_warn, cens_img, jpeg,
                          ident if illumination == "smooth" else None)
@@ -374,21 +379,23 @@ class _Run(NamedTuple):
     bar: object = None
 
 
-def _noise(photo: Photo, floor):
-    """σ (H, W, 3): the decoded image's noise and the relative model floor f (module
-    docstring), with a floor of 1e-6 of the image's largest value."""
-    return np.sqrt(photo.noise ** 2 + (floor * photo.linear) ** 2
+def _noise(photo: Photo, floor, sig_jpeg=None):
+    """σ (H, W, 3): the decoded image's noise (a JPEG's: `sig_jpeg`, `photo_jpeg`) and the
+    relative model floor f (module docstring), with a floor of 1e-6 of the image's largest
+    value."""
+    noise = photo.noise if sig_jpeg is None else sig_jpeg
+    return np.sqrt(noise ** 2 + (floor * photo.linear) ** 2
                    + (1e-6 * max(float(photo.linear.max()), 1e-12)) ** 2)
 
 
 def _setup(photo, valid, cens_img, levels, reference, stack, layer, cam, box, view,
-           grid_step_nm, screen_step_nm, model_floor, smoothness_nm, steps, chunk):
+           grid_step_nm, screen_step_nm, model_floor, smoothness_nm, steps, chunk, sig_jpeg):
     """(`_Run`, reference regions, σ image): the pixels to fit, the table's grid (step
     `grid_step_nm`) and the screen's (every m-th point), the view's cosines and weights."""
     lo, hi = box
     theta_o, alpha, na = view
     h, w = valid.shape
-    sig_img = _noise(photo, model_floor)
+    sig_img = _noise(photo, model_floor, sig_jpeg)
     g_n = int(np.ceil((hi - lo) / grid_step_nm)) + 1
     grid = np.linspace(lo, hi, g_n)
     step = (hi - lo) / (g_n - 1)
@@ -559,7 +566,10 @@ def _score(run: _Run, fit: _Fit, cam, photo, sig_rep, chi2_warn, cens_img, jpeg,
               f"thicknesses may be wrong") if robust > chi2_warn else None
     notes, loud = fit_notes(misfit, cens_img, run.valid, amb, why, jpeg, ident)
     described = _describe(photo, int(np.sum(np.any(cens_img > 0, axis=-1))))
-    return {"scale": np.sqrt(robust_fit), "amb": amb, "chi": chi, "rchi2": rchi2,
+    # a JPEG's σ (`photo_jpeg`) is not scaled down: its block errors along the colour curve,
+    # which move d, do not raise χ² (as the flags, `photo_flags`: s = max(1, robust))
+    scale = np.sqrt(max(robust_fit, 1.0) if jpeg else robust_fit)
+    return {"scale": scale, "amb": amb, "chi": chi, "rchi2": rchi2,
             "robust": robust, "notes": tuple(notes), "described": described}, loud
 
 

@@ -83,7 +83,9 @@ def features(pred, levels):
     """(G, 12) grid terms of `screen` from the predictions (G, 3) and the clip `levels`
     (black b, ceiling c; `fit.photo._censoring`)."""
     relu = np.maximum
-    black, ceiling = levels
+    black, ceiling = levels[0], levels[1]
+    if len(levels) > 2:  # a reading is of the colour the camera clipped at its floor
+        pred = np.maximum(pred, levels[2])
     return jnp.asarray(np.concatenate([pred * pred, pred, relu(pred - black, 0.0) ** 2,
                                        relu(ceiling - pred, 0.0) ** 2], axis=-1))
 
@@ -92,8 +94,10 @@ def residual(pred, o, sg, cens, levels):
     """(pred − o)/σ per channel; a channel censored at black (1) costs relu(pred − b)/σ, one
     at full scale (2) relu(c − pred)/σ: a clipped reading says only on which side the truth
     is, a one-sided (censored) observation (`levels` = (b, c), the black level and the
-    ceiling, `fit.photo._censoring`)."""
-    return jnp.where(cens == 0, pred - o,
+    ceiling, `fit.photo._censoring`). With a third level f (a JPEG's: 0), a reading is of
+    the colour the camera clipped at f before encoding: max(pred, f) − o."""
+    seen = jnp.maximum(pred, levels[2]) if len(levels) > 2 else pred
+    return jnp.where(cens == 0, seen - o,
                      jnp.where(cens == 1, jax.nn.relu(pred - levels[0]),
                                jax.nn.relu(levels[1] - pred))) / sg
 
@@ -148,7 +152,9 @@ def search_gains(obs, sig, cens, s_screen, grid, chunk, levels):
         for _ in range(8):
             idx, chi = screen_all(o, sg, cs, features(s_screen * g, levels), grid, 1, chunk,
                                    None)
-            g_new = closed_gains(o, sg, cs, s_screen[idx[:, 0]])
+            s_at = s_screen[idx[:, 0]]
+            keep = cs if len(levels) < 3 else np.where(s_at * g <= levels[0], 3, cs)
+            g_new = closed_gains(o, sg, keep, s_at)  # (a colour clipped at f: no reading)
             if np.allclose(g_new, g, rtol=1e-4):
                 break
             g = g_new

@@ -177,14 +177,16 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     which their own reads carry). The spread reads six more moment channels per read (the
     second moments): ≈ 1.18× the cost of `improved` a point, for ≈ 6 % lower mean ΔE₀₀ over
     the small-sources study's 18 renders (docs/studies/improved.md, "Choosing K"). Both
-    moves are shrunk by what the prefilter resolves (soft thresholds): a constant map's
-    read moments differ from the kernel's by ≤ 5.6e-4 in the mean (`MOMENT_RESOLUTION`)
-    and ≤ 7.2e-4 in the variance of x (`VARIANCE_RESOLUTION`;
-    64 × 128, 17 levels, random directions and levels, α = 0.05–0.5: the sampled kernel of
-    narrow levels and the bilinear read), so a constant environment gives Δc = 0 and s' = s,
-    the uniform-light model. Per-channel moments are combined weighted by each channel's
-    luminance. cos_o = ⟨n, ω_o⟩ > 0; `spread`: the bins' s_k (..., K)
-    (`improved.lookup_bins`, which the caller reads).
+    moves are measured against what the same read of a constant map gives, m₁ Σ_t w_t x_t
+    and ½(1 − m₂) + ½(3m₂ − 1) Σ_t w_t x_t² over its four texel centres ω_t, x_t = ⟨ω_o, ω_t⟩
+    (`prefilter._read_geometry`; not m₁x_d: within half a row of a pole the read clamps to
+    the first row, tilted from d_k by up to π/2h, which moved a constant map's bins by up to
+    3.5e-3 in c at 64 rows), and shrunk by what the prefilter resolves (soft thresholds,
+    `MOMENT_RESOLUTION`, `VARIANCE_RESOLUTION`: the sampled kernels of narrow levels), so a
+    constant environment gives Δc = 0 and s' = s, the uniform-light model (64 × 128, random
+    points, α ≥ 0.1; below, the narrow levels' polar rows leave shifts ≤ 9.3e-4).
+    Per-channel moments are combined weighted by each channel's luminance. cos_o = ⟨n, ω_o⟩
+    > 0; `spread`: the bins' s_k (..., K) (`improved.lookup_bins`, which the caller reads).
 
     With g reads a bin (a table of ``bin_table(reads=g)``: R = g·K reads, sorted by their
     incidence cosine, bin k served by reads gk … gk + g − 1; `ModelOptions.bin_reads`) the

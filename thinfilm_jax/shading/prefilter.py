@@ -292,9 +292,11 @@ def _level_lerp(pref: PrefilteredEnvMap, sqrt_alpha):
     return i0.astype(jnp.int32), t - i0
 
 
-def _read_levels(pref: PrefilteredEnvMap, tables, direction, sqrt_alpha, channels=None):
+def _read_levels(pref: PrefilteredEnvMap, tables, direction, sqrt_alpha, channels=None,
+                 taps=None):
     """Each of `tables` (L, h, w, ...) bilinear in direction, linear in √α between levels;
-    `channels`: per table, the index of the last axis to read (`envmap.read_taps`).
+    `channels`: per table, the index of the last axis to read (`envmap.read_taps`); `taps`:
+    `envmap.bilinear_taps(direction, h, w)` when the caller has them (`_read_geometry`).
 
     The texels and weights in direction (`envmap.bilinear_taps`, two arctangents) are found
     once for all tables and both levels; the two levels are the two steps of a `lax.scan`,
@@ -304,7 +306,7 @@ def _read_levels(pref: PrefilteredEnvMap, tables, direction, sqrt_alpha, channel
     long (figures/kernel_bench.md)."""
     i0, f = _level_lerp(pref, sqrt_alpha)
     h, w = tables[0].shape[1:3]
-    taps = bilinear_taps(direction, h, w)
+    taps = bilinear_taps(direction, h, w) if taps is None else taps
     shape = jnp.broadcast_shapes(direction.shape[:-1], f.shape)
     channels = (slice(None),) * len(tables) if channels is None else channels
 
@@ -317,6 +319,32 @@ def _read_levels(pref: PrefilteredEnvMap, tables, direction, sqrt_alpha, channel
     acc = tuple(jnp.zeros(shape + np.empty(t.shape[3:])[..., c].shape, jnp.result_type(t, f))
                 for t, c in zip(tables, channels))
     return jax.lax.scan(level, acc, jnp.arange(2, dtype=jnp.int32))[0]
+
+
+def _read_geometry(taps, h: int, w: int, view):
+    r"""What a bilinear read (`envmap.bilinear_taps` on an h × w level) sees of a view ω_o:
+    (Σ_t w_t x_t, Σ_t w_t x_t²), x_t = ⟨ω_o, ω_t⟩ over its four texel centres ω_t, weights
+    w_t. Every level of a constant map stores, at each texel centre, the moments of its
+    kernel, symmetric about ω_t: mean m₁ω_t and second moment ½(1 − m₂)I + ½(3m₂ − 1)ω_tω_tᵀ
+    (`prefilter_envmap`). Its read at d is their blend, so the read's ⟨ω_o, μ⟩ is m₁Σ w_t x_t
+    and its E⟨ω_o, ω_i⟩² is ½(1 − m₂) + ½(3m₂ − 1)Σ w_t x_t², not m₁⟨ω_o, d⟩ and
+    ½(1 − m₂) + ½(3m₂ − 1)⟨ω_o, d⟩²: the blend of unit vectors is shorter than d (second
+    order in the texel size) and, within half a texel of a pole, where the read clamps to
+    the first row, tilted from d by up to π/2h (first order: 0.049 at h = 32).
+    `methods.improved.bin_radiance_parts` compares the light's moments with these."""
+    i0, i1, j0, j1, fx, fy = taps
+    dt = fx.dtype
+    th = (np.arange(h) + 0.5) * np.pi / h
+    ph = (np.arange(w) + 0.5) * 2 * np.pi / w
+    st, ct = jnp.asarray(np.sin(th), dt), jnp.asarray(np.cos(th), dt)
+    cp, sp = jnp.asarray(np.cos(ph), dt), jnp.asarray(np.sin(ph), dt)
+    vx, vy, vz = view[..., 0], view[..., 1], view[..., 2]
+    x1 = x2 = 0.0
+    for i, j, wt in ((i0, j0, (1 - fx) * (1 - fy)), (i0, j1, fx * (1 - fy)),
+                     (i1, j0, (1 - fx) * fy), (i1, j1, fx * fy)):
+        x = st[i] * (cp[j] * vx + sp[j] * vy) + ct[i] * vz
+        x1, x2 = x1 + wt * x, x2 + wt * x * x
+    return x1, x2
 
 
 def lookup_prefiltered(pref: PrefilteredEnvMap, omega_r, sqrt_alpha):

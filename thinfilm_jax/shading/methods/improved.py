@@ -38,9 +38,9 @@ from ...spectral.lut import ShatLUT
 from ...spectral.reflectance import bare_bands
 from ...spectral.spectra import DEFAULT_OBSERVER
 from ...spectral.uplift import cross_band_name
-from ..envmap import luminance_weights
+from ..envmap import bilinear_taps, luminance_weights
 from ..prefilter import (MOMENT_RESOLUTION, VARIANCE_RESOLUTION, PrefilteredEnvMap,
-                         _level_lerp, _read_levels, lookup_albedo)
+                         _level_lerp, _read_geometry, _read_levels, lookup_albedo)
 from . import DEFAULT_SOURCES, ShadingMethod, shat_lut
 
 
@@ -177,14 +177,16 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     which their own reads carry). The spread reads six more moment channels per read (the
     second moments): ≈ 1.18× the cost of `improved` a point, for ≈ 6 % lower mean ΔE₀₀ over
     the small-sources study's 18 renders (docs/studies/improved.md, "Choosing K"). Both
-    moves are shrunk by what the prefilter resolves (soft thresholds): a constant map's
-    read moments differ from the kernel's by ≤ 5.6e-4 in the mean (`MOMENT_RESOLUTION`)
-    and ≤ 7.2e-4 in the variance of x (`VARIANCE_RESOLUTION`;
-    64 × 128, 17 levels, random directions and levels, α = 0.05–0.5: the sampled kernel of
-    narrow levels and the bilinear read), so a constant environment gives Δc = 0 and s' = s,
-    the uniform-light model. Per-channel moments are combined weighted by each channel's
-    luminance. cos_o = ⟨n, ω_o⟩ > 0; `spread`: the bins' s_k (..., K)
-    (`improved.lookup_bins`, which the caller reads).
+    moves are measured against what the same read of a constant map gives, m₁ Σ_t w_t x_t
+    and ½(1 − m₂) + ½(3m₂ − 1) Σ_t w_t x_t² over its four texel centres ω_t, x_t = ⟨ω_o, ω_t⟩
+    (`prefilter._read_geometry`; not m₁x_d: within half a row of a pole the read clamps to
+    the first row, tilted from d_k by up to π/2h, which moved a constant map's bins by up to
+    3.5e-3 in c at 64 rows), and shrunk by what the prefilter resolves (soft thresholds,
+    `MOMENT_RESOLUTION`, `VARIANCE_RESOLUTION`: the sampled kernels of narrow levels), so a
+    constant environment gives Δc = 0 and s' = s, the uniform-light model (64 × 128, random
+    points, α ≥ 0.1; below, the narrow levels' polar rows leave shifts ≤ 9.3e-4).
+    Per-channel moments are combined weighted by each channel's luminance. cos_o = ⟨n, ω_o⟩
+    > 0; `spread`: the bins' s_k (..., K) (`improved.lookup_bins`, which the caller reads).
 
     With g reads a bin (a table of ``bin_table(reads=g)``: R = g·K reads, sorted by their
     incidence cosine, bin k served by reads gk … gk + g − 1; `ModelOptions.bin_reads`) the
@@ -193,7 +195,7 @@ def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alph
     the bin), and the uniform-light x̄_k, v_k those of the g kernels pooled, i.e. the mean of
     m₁x_d and of E[x²] less the pooled mean squared; g = 1 is the formulas above."""
     reads = _pooled_reads(pref, table, normal, view, alpha, cos_o, spread, light_spread)
-    dx = _soft(reads.x_light - reads.x_uniform, MOMENT_RESOLUTION)
+    dx = _soft(reads.x_light - reads.x_read, MOMENT_RESOLUTION)
     s = jnp.moveaxis(spread, -1, 0)
     lim = 3.0**0.5 * s
     shift = jnp.clip(_incidence_cos(reads.x_uniform + dx) - _incidence_cos(reads.x_uniform),
@@ -213,7 +215,9 @@ class _Reads(NamedTuple):
     moments: Array
     x_light: Array
     x_uniform: Array
+    x_read: Array
     x_d: Array
+    x2_read: Array
     view: tuple  # ω_o's components (vx, vy, vz)
     g: int
     at_read: Any
@@ -225,8 +229,12 @@ def _pooled_reads(pref, table, normal, view, alpha, cos_o, spread, light_spread)
     and their means per bin when a bin has g > 1 reads (`bin_radiance_parts`)."""
     dirn, sqa, view_cos = lookup_reads(table, normal, view, cos_o, alpha, view_cosines=True)
     dirn, sqa = jnp.moveaxis(dirn, -2, 0), jnp.moveaxis(sqa, -1, 0)
+    h, w = pref.radiance.shape[1:3]
+    taps = bilinear_taps(dirn, h, w)
     rad, mom = _read_levels(pref, (pref.radiance, pref.moments), dirn, sqa,
-                            channels=(slice(None), slice(None if light_spread else 3)))
+                            channels=(slice(None), slice(None if light_spread else 3)),
+                            taps=taps)
+    xt1, xt2 = _read_geometry(taps, h, w, view)  # Σ w_t x_t, Σ w_t x_t² of the read
     lum = [float(c) for c in luminance_weights()]
 
     def luminance(v):  # components written out: a size-3 jnp.sum is a slow XLA:CPU kernel
@@ -251,6 +259,7 @@ def _pooled_reads(pref, table, normal, view, alpha, cos_o, spread, light_spread)
     vx, vy, vz = view[..., 0], view[..., 1], view[..., 2]
     x_light = mom[..., 0] * vx + mom[..., 1] * vy + mom[..., 2] * vz  # ⟨ω_o, μ_r⟩
     x_uniform = m1 * x_d
+    x_read = m1 * xt1  # what the read of a constant map gives (`prefilter._read_geometry`)
     light_mean = None
     if g > 1:  # a bin's g reads: radiance and uniform moments averaged, light's by luminance
         y = luminance(rad)
@@ -263,7 +272,9 @@ def _pooled_reads(pref, table, normal, view, alpha, cos_o, spread, light_spread)
 
         rad = _bin_mean(rad, g)
         x_light, x_uniform = light_mean(x_light), _bin_mean(x_uniform, g)
-    return _Reads(rad, mom, x_light, x_uniform, x_d, (vx, vy, vz), g, at_read, light_mean)
+        x_read = _bin_mean(x_read, g)
+    return _Reads(rad, mom, x_light, x_uniform, x_read, x_d, xt2, (vx, vy, vz), g, at_read,
+                  light_mean)
 
 
 def _light_spread(reads: _Reads, table, s):
@@ -276,12 +287,14 @@ def _light_spread(reads: _Reads, table, s):
     x2_light = (xx * vx * vx + yy * vy * vy + zz * vz * vz
                 + 2.0 * (xy * vx * vy + yz * vy * vz + zx * vz * vx))  # E_L⟨ω_o, ω_i⟩²
     x2_uniform = 0.5 * (1.0 - m2) + 0.5 * (3.0 * m2 - 1.0) * x_d * x_d  # E_U⟨ω_o, ω_i⟩²
+    x2_read = 0.5 * (1.0 - m2) + 0.5 * (3.0 * m2 - 1.0) * reads.x2_read  # a constant map's
     if g > 1:  # the bin's reads pooled, as their means above
         x2_light, x2_uniform = reads.light_mean(x2_light), _bin_mean(x2_uniform, g)
-    x_light, x_uniform = reads.x_light, reads.x_uniform
+        x2_read = _bin_mean(x2_read, g)
+    x_light, x_uniform, x_read = reads.x_light, reads.x_uniform, reads.x_read
     v_light = x2_light - x_light * x_light
     v_uniform = x2_uniform - x_uniform * x_uniform
-    dv = _soft(v_light - v_uniform, VARIANCE_RESOLUTION)
+    dv = _soft(v_light - (x2_read - x_read * x_read), VARIANCE_RESOLUTION)
     ok = v_uniform > 0
     ratio = jnp.where(ok, (v_uniform + dv) / jnp.where(ok, v_uniform, 1.0), 1.0)
     return s * safe_sqrt(jnp.clip(ratio, 0.0, 4.0))

@@ -551,7 +551,8 @@ def _score(run: _Run, fit: _Fit, cam, photo, sig_rep, chi2_warn, cens_img, jpeg,
     robust_fit = float(np.median(chi) / _CHI2_2_MEDIAN)
     span = (float(known[pads].min()), float(known[pads].max())) if (
         cam.kind == "unknown" and pads.any()) else None
-    why = flag_reasons(chi, fit.chi_alt, robust_fit, fit.d, run.where, run.valid.shape, span)
+    why = flag_reasons(chi, fit.chi_alt, robust_fit, fit.d, run.where, run.valid.shape, span,
+                       lossy=jpeg)
     amb = np.any(np.stack(list(why.values())), axis=0)
     if sig_rep is not None:
         pred = _host_hermite(fit.d, run.lo, run.step, *fit.table[3:5]) @ fit.gm.T

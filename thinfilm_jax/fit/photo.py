@@ -54,12 +54,12 @@ The fit, in the order it runs:
 5. **Uncertainty.** The reduced χ² = Σ χ²_p / (2P − n_global) (3 residuals, one thickness per
    pixel). Standard errors are the linearised ones σ_d = (J^T J)^{-1/2} times the square root
    of the robust reduced χ² below (the noise scale of the typical pixel; for a JPEG, of
-   max(1, it));
-   a pixel is `ambiguous` where another local minimum at least 15 nm away (another fringe
-   order) has a χ² above its own by less than 4 · max(1, robust reduced χ²) (two standard
-   deviations), or than 4 χ²_p (the pixel's own misfit), where its neighbours disagree by
-   two fringe-order separations, or, for an unknown camera, beyond the pads' span
-   (`fit.photo_flags`). A robust reduced χ² (the median pixel's χ² over the median of χ²₂)
+   max(1, it)); a pixel is `ambiguous` where another local minimum at least 15 nm away
+   (another fringe order) has a χ² above its own by less than 4 · max(1, robust reduced χ²)
+   (two standard deviations), or than 4 χ²_p (the pixel's own misfit), where its neighbours
+   disagree by two fringe-order separations, for an unknown camera beyond the pads' span,
+   or, for a JPEG, more than 10 nm off the plane of its 5 × 5 neighbourhood (its block
+   error, which χ² and σ_d do not see: `fit.photo_flags`). A robust reduced χ² (the median pixel's χ² over the median of χ²₂)
    above `chi2_warn` raises a warning (in the result and by `warnings.warn`): the model does not
    explain the photograph (wrong encoding, camera, light, angle or material). It is robust
    so that a few outlying pixels (an edge, a scratch) do not raise it.
@@ -551,7 +551,8 @@ def _score(run: _Run, fit: _Fit, cam, photo, sig_rep, chi2_warn, cens_img, jpeg,
     robust_fit = float(np.median(chi) / _CHI2_2_MEDIAN)
     span = (float(known[pads].min()), float(known[pads].max())) if (
         cam.kind == "unknown" and pads.any()) else None
-    why = flag_reasons(chi, fit.chi_alt, robust_fit, fit.d, run.where, run.valid.shape, span)
+    why = flag_reasons(chi, fit.chi_alt, robust_fit, fit.d, run.where, run.valid.shape, span,
+                       lossy=jpeg)
     amb = np.any(np.stack(list(why.values())), axis=0)
     if sig_rep is not None:
         pred = _host_hermite(fit.d, run.lo, run.step, *fit.table[3:5]) @ fit.gm.T

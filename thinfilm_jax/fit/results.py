@@ -54,8 +54,9 @@ class MapResult(NamedTuple):
         sigma: the noise level a map fit used (given, or `map_quality.estimate_noise`);
             None for a photograph (per-pixel noise, `core.image`).
         ambiguous: (H, W) bool: the pixel's thickness is not pinned by its data (another
-            fringe order explains it within its noise, its neighbours disagree, or, for a
-            map, it sits on the box's bound; `map_quality.order_flags`, `photo_flags`).
+            fringe order explains it within its noise, its neighbours disagree, a JPEG's
+            pixel is off its neighbourhood's plane by 10 nm, or, for a map, it sits on the
+            box's bound; `map_quality.order_flags`, `photo_flags`).
         alternative: (H, W) that other order's thickness (nm; NaN where none was found).
         at_bound: (H, W) bool: a map's thickness sits on a bound of the box; None for a
             photograph.

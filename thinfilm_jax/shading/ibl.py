@@ -145,9 +145,10 @@ def envmap_radiance(film, alpha, normal, view, envmap, *, method: str = "referen
             docs/improved.md). None: 4 for "improved", 0 for "ideal" and "filtered" (the
             published method). A `PrefilteredEnvMap` carries its own split (it was made
             by `prefilter_envmap(sources=...)`) and every real-time method shades it.
-    Shading points with ⟨n, ω_o⟩ ≤ 0 give 0. Under a constant map a real-time method gives
-    its own `patch_radiance` model to ≤ 1e-3 from prefiltered levels of 64 rows
-    (`prefilter_envmap`, "Uniform light"), not from coarser ones.
+    Shading points with ⟨n, ω_o⟩ ≤ 0 give 0. Under a constant map `ideal` and `improved`
+    give their own `patch_radiance` models to ≤ 4e-4 when the prefiltered levels have at
+    least 64 rows, not from coarser ones (`prefilter_envmap`, "Uniform light", which also
+    says where `filtered` departs from its model).
 
     A `Stack`, or a `Film` with index models (SPEC §12), runs the stack code in the exact
     methods (its thicknesses may vary per point, its indices are shared); the real-time ones

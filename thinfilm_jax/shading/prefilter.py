@@ -221,6 +221,28 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
     Cost: Σ_levels h·N_l kernel evaluations and h FFT correlations over N_l texels (N_l input
     texels of level l, `filter_level`), once: 2.8–3.3 s for a 512 × 1024 map (float64, 2-core
     CPU; 44–45 s when every output texel summed every input texel; figures/prefilter_bench.md).
+
+    Uniform light (SPEC §7, §9): under a constant map L ≡ 1 a real-time method's
+    `envmap_radiance` is its own `patch_radiance` model when the levels have at least
+    64 rows (a map of 64 × 128 or larger at the default `resolution`). Worst band
+    difference, film d = 600 nm (and d = 0 alike), α ∈ [0.005, 0.6], two normals
+    (benchmarks/envmap_consistency.py):
+
+    | levels | method | θ_o < 80° | 80–88° | 88–90° |
+    |---|---|---:|---:|---:|
+    | 64 × 128 | ideal, improved (every preset) | 1.1e-4 | 2.1e-4 | 3.9e-4 |
+    | 32 × 64 | ideal | 7.5e-5 | 1.9e-4 | 3.9e-4 |
+    | 32 × 64 | improved (every preset) | 8.7e-4 | 6.2e-3 | 1.6e-2 |
+
+    Below 64 rows a texel (π/32 = 0.098 rad) is wider than the narrow levels' lobes
+    (α ≲ 0.04), so `filter_level`'s midpoint sum over texels misstates the constant map's
+    mean cosine m₁ by more than `MOMENT_RESOLUTION` (equator, √α = 0.125: 0.99914 against
+    the kernel's 0.99676; 64 rows: 0.99748); `improved` compares each read with the
+    kernel's own m₁ (`methods.improved.bin_radiance_parts`) and moves its bins by up to
+    5e-3 in cos θ₁. `filtered` reads its light moments as
+    stored (the published method): they are bilinear in direction and linear in √α
+    between levels, so its K 22 cosine near grazing departs from the uniform-light split
+    sum's at any size (64 × 128: ≤ 1.5e-3 below 80°, ≤ 3.7e-2 above).
     """
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(env)):

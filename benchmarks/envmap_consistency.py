@@ -16,6 +16,12 @@ improved at the presets "fast", "default" and "accurate" (`ModelOptions.preset`)
 Run: ``python -m benchmarks.envmap_consistency [--sizes 64,32] [--table]`` (float64,
 ≈ 2-4 min a map size on a 2-core CPU). Nothing is asserted here: the pins are in
 tests/shading/test_ibl.py.
+
+Example (the two frames of views, every view in front of its normal):
+    >>> import numpy as np
+    >>> from benchmarks.envmap_consistency import frames
+    >>> [(v.shape, bool(np.all(v @ n > 0))) for n, v in frames()]
+    [((18, 3), True), ((18, 3), True)]
 """
 
 from __future__ import annotations

@@ -222,7 +222,8 @@ def test_constant_environment_at_grazing_views_and_small_alpha(constant):
     method's map path = its uniform-light model, ≤ 2e-3 in band radiance) where it broke:
     θ_o ≥ 86°, α ≤ 0.02, whose A is read near the table's grazing edge. Measured worst
     band difference 64 × 128, normal +z: ideal 3.9e-4, improved 3.7e-4 (before the table's
-    view coordinate `prefilter.albedo_coordinate`: 8.9e-3 and 8.3e-3); bound 6.5e-4. benchmarks/envmap_consistency.py sweeps map sizes, presets, films and a
+    view coordinate `prefilter.albedo_coordinate`: 8.9e-3 and 8.3e-3); bound 6.5e-4.
+    benchmarks/envmap_consistency.py sweeps map sizes, presets, films and a
     tilted normal."""
     theta = np.deg2rad(np.array([86.0, 88.0, 89.0, 89.5]))
     alpha = np.array([0.005, 0.01, 0.02])[:, None]

@@ -64,7 +64,7 @@ from ..core.methods import MethodNames
 from ..core.stack import Stack
 from ..optics.airy import choose_arithmetic
 from ..realtime.options import ModelOptions, check_options
-from ..spectral.reflectance import band_centroids, band_film
+from ..spectral.reflectance import band_centroids, band_film, choose_layer
 from ..spectral.spectra import DEFAULT_OBSERVER, OBSERVERS, get_observer
 from .carpaint_ibl import PAINT_ENVMAP_METHODS as PAINT_METHODS
 from .carpaint_ibl import paint_envmap_radiance
@@ -125,8 +125,11 @@ def envmap_radiance(film, alpha, normal, view, envmap, *, method: str = "referen
             shat="auto", `ModelOptions()`'s, is "lut" here, so equal options give one program):
             terms = Fourier orders M and shat = Ŝ source of the real-time methods,
             arithmetic ("auto" specialises a concrete dielectric film), bins = K of
-            `improved` (fewer: cheaper, less accurate); ndf must be "ggx" (the prefiltered
-            maps are GGX); quadrature does not apply.
+            `improved` (fewer: cheaper, less accurate); layer "auto" gives a film whose
+            thicknesses are all concretely 0 the bare interface's exact R₁₃ Ŝ_jk(0) in the
+            real-time methods, as `patch_radiance` does ("bare" forces it, "film" keeps
+            the series); ndf must be "ggx" (the prefiltered maps are GGX); quadrature does
+            not apply.
         cross_band: True: R_jk under RGB light (SPEC §9); False: the diagonal approximation.
         subdivisions: s Gauss nodes per axis inside each refined texel (reference); None = auto.
         n_cos: nodes of the reference's R_jk(cos θ₁) table.
@@ -142,7 +145,10 @@ def envmap_radiance(film, alpha, normal, view, envmap, *, method: str = "referen
             docs/improved.md). None: 4 for "improved", 0 for "ideal" and "filtered" (the
             published method). A `PrefilteredEnvMap` carries its own split (it was made
             by `prefilter_envmap(sources=...)`) and every real-time method shades it.
-    Shading points with ⟨n, ω_o⟩ ≤ 0 give 0.
+    Shading points with ⟨n, ω_o⟩ ≤ 0 give 0. Under a constant map `ideal` and `improved`
+    give their own `patch_radiance` models to ≤ 4e-4 when the prefiltered levels have at
+    least 64 rows, not from coarser ones (`prefilter_envmap`, "Uniform light", which also
+    says where `filtered` departs from its model).
 
     A `Stack`, or a `Film` with index models (SPEC §12), runs the stack code in the exact
     methods (its thicknesses may vary per point, its indices are shared); the real-time ones
@@ -216,15 +222,13 @@ def _one_film_envmap(film, alpha, normal, view, envmap, method, observer, *, opt
     if options.ndf != "ggx":
         raise ValueError(f"envmap_radiance supports ndf='ggx' only (the prefiltered maps and "
                          f"the reference's lobe are GGX), got ndf={options.ndf!r}")
-    if options.layer == "bare":
-        raise ValueError("envmap_radiance has no bare-interface path (ModelOptions.layer): "
-                         "use layer='auto' or 'film'")
     terms, shat = options.terms, options.shat
     V.check_directions(normal, view)
     shape = V.check_broadcast([("film", np.zeros(film.shape)), ("alpha", alpha),
                                ("normal", np.zeros(np.shape(normal)[:-1])),
                                ("view", np.zeros(np.shape(view)[:-1]))])
     arithmetic = choose_arithmetic(film, options.arithmetic)
+    layer = choose_layer(film, options.layer)  # "bare" at d = 0: the real-time methods' R₁₃
     realtime = m.envmap_kind == "realtime"
     if isinstance(envmap, PrefilteredEnvMap):
         if not realtime:
@@ -245,7 +249,7 @@ def _one_film_envmap(film, alpha, normal, view, envmap, method, observer, *, opt
         if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
             raise ValueError("the PrefilteredEnvMap was built for another observer")
         cfg = (method, observer, terms, shat, bool(cross_band), arithmetic,
-               m.map_static(options))
+               m.map_static(options), layer)
         pref = m.envmap_tables(pref, options, dtype)  # e.g. `improved`'s (θ_o, α) tables
         return _realtime_jit(film, alpha, *nv, pref, cfg, int(batch_size or 65536))
     return exact_radiance(film, alpha, *nv, env, method=method, observer=observer,

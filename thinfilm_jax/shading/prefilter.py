@@ -16,7 +16,7 @@ t (centre ω_t, solid angle Ω_t, RGB radiance c_t, weights w_t = k_α(ω_r, ω_
 * the nine moment channels of K §3.2, E[ω], E[ω ωᵀ] (x, y, z, xx, yy, zz, xy, yz, zx) of
   ω_i under p ∝ k_α Y(c_t) (luminance Y of Rec. 709, `moments="luminance"`, the paper's
   choice) or under p ∝ k_α c_{t,k} per RGB channel (`moments="per_channel"`);
-* the prefiltered BRDF A(θ_o, α) (K 9, SPEC §6) on a (θ_o, √α) grid, from
+* the prefiltered BRDF A(θ_o, α) (K 9, SPEC §6) on a (θ_o, √α) grid dense near grazing, from
   `microfacet.albedo` (the one implementation);
 * the Ŝ(μ, σ²) LUT of the cross bands S_j B_k (`uplift`), for K 29 under RGB light.
 
@@ -67,6 +67,7 @@ __all__ = [
     "filter_level",
     "prefilter_envmap",
     "albedo_table",
+    "albedo_coordinate",
     "lookup_prefiltered",
     "lookup_radiance",
     "lookup_albedo",
@@ -90,7 +91,8 @@ class PrefilteredEnvMap(NamedTuple):
     radiance: (L, h, w, 3) prefiltered RGB radiance.
     moments: (L, h, w, 9) luminance-weighted or (L, h, w, 3, 9) per-channel moments
         (x, y, z, xx, yy, zz, xy, yz, zx).
-    albedo: (n_u, n_a) A(θ_o, α) on uniform grids of √cos θ_o and √α (`albedo_table`).
+    albedo: (n_u, n_a) A(θ_o, α) on uniform grids of the view coordinate t
+        (`albedo_coordinate`) and √α (`albedo_table`).
     lut: `ShatLUT` of the cross bands (J·3 bands).
     sources: `sources.Sources` split from the map (`prefilter_envmap(sources=...)`), shaded
         apart by every real-time method; the levels then hold the residual map. None: none.
@@ -208,7 +210,8 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
         resolution: (h, w) of every level, w = 2h, dividing the map's size; default
             (64, 128) or the map's own if smaller.
         moments: "luminance" (K §3.2, 9 channels) or "per_channel" (27 channels).
-        albedo_shape: nodes of the A table in √cos θ_o and in √α (`albedo_table`).
+        albedo_shape: nodes of the A table in its view coordinate t and in √α
+            (`albedo_table`).
         dtype: float dtype of the tables (default: the map's).
         sources: split up to this many compact bright sources (suns) from the map at its
             full resolution (`sources.extract_sources`, defaults there) and prefilter the
@@ -218,6 +221,29 @@ def prefilter_envmap(envmap, *, observer: str = DEFAULT_OBSERVER, levels: int = 
     Cost: Σ_levels h·N_l kernel evaluations and h FFT correlations over N_l texels (N_l input
     texels of level l, `filter_level`), once: 2.8–3.3 s for a 512 × 1024 map (float64, 2-core
     CPU; 44–45 s when every output texel summed every input texel; figures/prefilter_bench.md).
+
+    Uniform light (SPEC §7, §9): under a constant map L ≡ 1 a real-time method's
+    `envmap_radiance` is its own `patch_radiance` model when the levels have at least
+    64 rows (a map of 64 × 128 or larger at the default `resolution`). Worst band
+    difference, film d = 600 nm (and d = 0 alike), α ∈ [0.005, 0.6], two normals
+    (benchmarks/envmap_consistency.py):
+
+    | levels | method | θ_o < 80° | 80–88° | 88–90° |
+    |---|---|---:|---:|---:|
+    | 64 × 128 (maps 64 × 128, 128 × 256) | ideal, improved (all presets) | 1.1e-4 | 2.1e-4 | 3.9e-4 |
+    | 32 × 64 | ideal | 7.5e-5 | 1.9e-4 | 3.9e-4 |
+    | 32 × 64 | improved (all presets) | 8.7e-4 | 6.2e-3 | 1.6e-2 |
+
+    Below 64 rows a texel (π/32 = 0.098 rad) is wider than the narrow levels' lobes
+    (α ≲ 0.04), so `filter_level`'s midpoint sum over texels misstates the constant map's
+    mean cosine m₁ by more than `MOMENT_RESOLUTION` (equator, √α = 0.125: 0.99914 against
+    the kernel's 0.99676; 64 rows: 0.99748); `improved` compares each read with the
+    kernel's own m₁ (`methods.improved.bin_radiance_parts`) and moves its bins by up to
+    5e-3 in cos θ₁. `filtered` reads its light moments as
+    stored (the published method): they are bilinear in direction and linear in √α
+    between levels, so its K 22 cosine near grazing departs from the uniform-light split
+    sum's at any size (64 × 128: ≤ 1.5e-3 below 80°, ≤ 3.7e-2 above; 2–4× less at α on
+    a level, e.g. 4.0e-3 against 1.1e-2 at θ_o = 89°, √α = 0.1875 against 0.2236).
     """
     env = envmap if isinstance(envmap, EnvMap) else load_envmap(envmap)
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(env)):
@@ -274,15 +300,45 @@ def _prefilter(env, observer, levels, resolution, moments, albedo_shape, dtype, 
                              with_film_tables(found, observer, dtype).astype(dtype))
 
 
+#: c of the albedo table's view coordinate t = u (1 + k) / (u + k), k = c max(√α, √α_min)
+#: (`albedo_table`)
+ALBEDO_WARP = 1.0
+#: the α of the table's √α = 0 column (and the floor of k's √α)
+ALBEDO_MIN_ALPHA = 1e-4
+
+
+def albedo_coordinate(u, sqrt_alpha, xp=jnp):
+    r"""The albedo table's view coordinate t ∈ [0, 1] of u = √cos θ_o at √α (`albedo_table`):
+
+    $$ t = \frac{u\,(1 + k)}{u + k},\qquad k = c\,\max(\sqrt\alpha, 10^{-2}),\ c = 1. $$
+
+    t(0) = 0, t(1) = 1, increasing; u = k t / (1 + k − t) inverts it. c = 1 of 0.5, 1, 2
+    (worst read error at θ_o ≥ 88° on the 64 × 33 table: 5.4e-4, 5.3e-4, 7.8e-4)."""
+    k = ALBEDO_WARP * xp.maximum(sqrt_alpha, float(np.sqrt(ALBEDO_MIN_ALPHA)))
+    return u * (1 + k) / (u + k)
+
+
 @functools.cache
 def albedo_table(n_u: int = 64, n_a: int = 33) -> np.ndarray:
-    """A(θ_o, α) (`microfacet.albedo`) on uniform grids of u = √cos θ_o and √α ∈ [0, 1]
-    (√α = 0 evaluated at α = 1e-4). The √cos grid resolves the steep fall of A at grazing
-    views: bilinear lookup error ≤ 8e-4 for θ_o < 80°, ≤ 5e-3 up to 90° (64 × 33)."""
-    u = np.linspace(0.0, 1.0, n_u)
-    sqa = np.linspace(0.0, 1.0, n_a)
-    theta = np.arccos(u**2)
-    return np.asarray(albedo(theta[:, None], np.maximum(sqa**2, 1e-4)[None, :]))
+    r"""A(θ_o, α) (`microfacet.albedo`) on uniform grids of the view coordinate t of
+    `albedo_coordinate` and of √α ∈ [0, 1] (√α = 0 evaluated at α = 1e-4).
+
+    Near grazing the GGX albedo is a function of cos θ_o / α: it dips (to ≈ 0.89) where
+    cos θ_o ≈ α and returns to 1 at cos θ_o = 0, a feature of width ∝ √α in u = √cos θ_o.
+    t = u (1 + k)/(u + k) with k ∝ √α puts that dip at the same t for every small α (half
+    the nodes below u = √α at c = 1), so the bilinear read follows it in both directions;
+    uniform in u, the table missed it at small α (linear in √α between columns whose dips
+    sit at different u). Bilinear read against the quadrature (`lookup_albedo`, 64 × 33,
+    α ∈ [0.002, 1], measured by benchmarks/envmap_consistency.py --table): θ_o < 80°:
+    ≤ 4.3e-4; 80–88°: ≤ 3.5e-4; 88–90°: ≤ 5.1e-4 (uniform in u: 6.1e-4, 3.2e-3, 2.9e-2).
+    The read costs one division more than uniform u (t), at the same two-by-two taps."""
+    t = np.linspace(0.0, 1.0, n_u)[:, None]
+    sqa = np.linspace(0.0, 1.0, n_a)[None, :]
+    k = ALBEDO_WARP * np.maximum(sqa, np.sqrt(ALBEDO_MIN_ALPHA))
+    u = k * t / (1 + k - t)  # the inverse of `albedo_coordinate`
+    theta = np.arccos(np.clip(u * u, 0.0, 1.0))
+    return np.asarray(albedo(theta, np.broadcast_to(np.maximum(sqa**2, ALBEDO_MIN_ALPHA),
+                                                    theta.shape)))
 
 
 def _level_lerp(pref: PrefilteredEnvMap, sqrt_alpha):
@@ -358,7 +414,7 @@ def lookup_radiance(pref: PrefilteredEnvMap, direction, sqrt_alpha):
 
 
 def lookup_albedo(pref: PrefilteredEnvMap, cos_o, sqrt_alpha):
-    """A(θ_o, α) from the table: bilinear in (√cos θ_o, √α)."""
+    """A(θ_o, α) from the table: bilinear in (t, √α), t = `albedo_coordinate`(√cos θ_o, √α)."""
     n_u, n_a = pref.albedo.shape
 
     def cell(x, n):
@@ -366,7 +422,7 @@ def lookup_albedo(pref: PrefilteredEnvMap, cos_o, sqrt_alpha):
         i = jnp.clip(jnp.floor(t), 0, n - 2)
         return i.astype(jnp.int32), t - i
 
-    j0, fu = cell(jnp.sqrt(jnp.clip(cos_o, 0.0, 1.0)), n_u)
+    j0, fu = cell(albedo_coordinate(jnp.sqrt(jnp.clip(cos_o, 0.0, 1.0)), sqrt_alpha), n_u)
     i0, fa = cell(sqrt_alpha, n_a)
     tab = pref.albedo
     a0 = tab[j0, i0] * (1 - fu) + tab[j0 + 1, i0] * fu

@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from ...core.material import expand_batch
 from ...spectral.lut import build_shat_lut
+from ...spectral.reflectance import bare_bands
 from ...spectral.uplift import cross_band_name
 from ..prefilter import lookup_albedo, lookup_prefiltered
 from ..sources import source_radiance
@@ -97,7 +99,7 @@ def shat_lut(pref, cfg, dtype):
 
 def with_sources(out, film, alpha, normal, view, pref, cfg):
     """`out` plus the suns split from the map (`sources.source_radiance`), if any."""
-    _, observer, terms, shat, cross, arithmetic, _ = cfg
+    _, observer, terms, shat, cross, arithmetic = cfg[:6]
     if pref.has_sources:
         lut = shat_lut(pref, cfg, alpha.dtype)
         out = out + source_radiance(film, alpha, normal, view, pref.sources,
@@ -109,7 +111,9 @@ def with_sources(out, film, alpha, normal, view, pref, cfg):
 class SplitSum(ShadingMethod):
     """A split-sum method under a map: A(θ_o, α) Σ_k R_jk P_k(ω_r, α) (module docstring);
     a subclass gives R through `bands_per_light` (Σ_k R_jk P_k read per light channel) and
-    `bands` (R_j or R_jk, per moment channel where the map has them)."""
+    `bands` (R_j or R_jk, per moment channel where the map has them), and for a bare layer
+    (d = 0, ``cfg[7] == "bare"``: `reflectance.choose_layer`) the incidence cosine of its
+    exact R₁₃ Ŝ_jk(0) through `bare_cos`, as its uniform-light `patch_point` does."""
 
     envmap_kind = "realtime"
 
@@ -119,8 +123,13 @@ class SplitSum(ShadingMethod):
     def bands(self, film, co, view, mom, pref, kw):
         raise NotImplementedError
 
+    def bare_cos(self, co, view, mom):
+        """cos θ₁ of the bare interface's R₁₃ (..., [k]), per moment channel where the map
+        has them."""
+        raise NotImplementedError
+
     def map_light(self, film, alpha, normal, view, pref, cfg):
-        _, observer, terms, shat, cross, arithmetic, _ = cfg
+        _, observer, terms, shat, cross, arithmetic, _, layer = cfg
         cos_o = jnp.sum(normal * view, axis=-1)
         up = cos_o > 0
         co = jnp.where(up, cos_o, 1.0)
@@ -132,14 +141,20 @@ class SplitSum(ShadingMethod):
         lut = pref.lut if cross else None
         if shat == "lut" and not cross:  # the diagonal path reads the plain bands' table
             lut = build_shat_lut(observer, dtype=alpha.dtype)
-        per_light = cross and shat == "lut" and not pref.per_channel
+        per_light = cross and shat == "lut" and not pref.per_channel and layer != "bare"
         if per_light:  # Σ_k R_jk P_k read per light channel (`filtered.filtered_bands`)
             kw = dict(observer=obs, terms=terms, shat=shat, lut=lut, arithmetic=arithmetic,
                       light=rad)
             out = self.bands_per_light(film, co, view, mom, kw)
             return jnp.where(up[..., None], a[..., None] * out, 0.0)
-        r = self.bands(film, co, view, mom, pref, dict(observer=obs, terms=terms, shat=shat,
-                                                        lut=lut, arithmetic=arithmetic))
+        if layer == "bare":  # no film: the exact R₁₃ Ŝ_jk(0) (`bare_bands`)
+            c = self.bare_cos(co, view, mom)
+            r = bare_bands(expand_batch(film) if c.ndim > co.ndim else film, c, obs,
+                           shat=shat, arithmetic=arithmetic)
+        else:
+            r = self.bands(film, co, view, mom, pref, dict(observer=obs, terms=terms,
+                                                            shat=shat, lut=lut,
+                                                            arithmetic=arithmetic))
         if cross:
             r = r.reshape(r.shape[:-1] + (3, 3))  # (..., [k,] j, k)
             if r.ndim > rad.ndim + 1:  # per-channel moments: keep k of the moments = k of R

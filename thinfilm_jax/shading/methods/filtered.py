@@ -65,5 +65,10 @@ class Filtered(SplitSum):
                                    interpolation=MAP_SHAT_READ)
         return filtered_kernel(film, view, mean, cov, **kw, interpolation=MAP_SHAT_READ)
 
+    def bare_cos(self, co, view, mom):  # cos θ₁* of the read's mean light (K 22)
+        mean, cov = moments_to_mean_cov(mom)
+        wo = view[..., None, :] if mom.ndim > view.ndim else view
+        return cos_incidence_from_projection(project_light_moments(wo, mean, cov)[0])
+
 
 FILTERED = Filtered()

@@ -54,6 +54,9 @@ class Ideal(SplitSum):
     def bands(self, film, co, view, mom, pref, kw):
         return ideal_kernel(film, co, **kw)
 
+    def bare_cos(self, co, view, mom):
+        return co
+
     def envmap_stack(self, material, alpha, normal, view, envmap, observer, kw):
         return tabulated_ideal(material, alpha, normal, view, envmap, observer, kw)
 

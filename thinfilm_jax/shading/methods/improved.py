@@ -78,12 +78,12 @@ class Improved(ShadingMethod):
         return pref[0]
 
     def map_light(self, film, alpha, normal, view, pref, cfg):
-        _, observer, terms, shat, cross, arithmetic, light_spread = cfg
+        _, observer, terms, shat, cross, arithmetic, light_spread, layer = cfg
         pref, table = pref
         return improved_envmap(film, alpha, normal, view, pref, table, observer=observer,
                                terms=terms, shat=shat, lut=shat_lut(pref, cfg, alpha.dtype),
                                arithmetic=arithmetic, cross_band=cross,
-                               light_spread=light_spread)
+                               light_spread=light_spread, layer=layer)
 
 
 IMPROVED = Improved()
@@ -92,7 +92,8 @@ IMPROVED = Improved()
 def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
                     observer=DEFAULT_OBSERVER, terms: int = 2, shat: str = "lut",
                     lut: ShatLUT | None = None, arithmetic: str = "complex",
-                    cross_band: bool = True, light_spread: bool = False) -> Array:
+                    cross_band: bool = True, light_spread: bool = False,
+                    layer: str = "film") -> Array:
     r"""`envmap_radiance(method="improved")` at shading points: L_j (..., J), 0 where ⟨n,ω_o⟩ ≤ 0.
 
     $$ L_j = \frac{A(\theta_o,\alpha)}{K}\sum_{k=1}^{K}\sum_c
@@ -120,6 +121,9 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
         cross_band: R_jc under RGB light (SPEC §9) or the diagonal R_j P_j.
         light_spread: each bin's spread of cos θ₁ follows its read's light too
             (`bin_radiance_parts`; `ModelOptions.light_spread`).
+        layer: "film", or "bare" (d = 0): each bin's film term is the exact R₁₃ Ŝ_jc(0) at
+            its cosine c̄_k + Δc_k (`reflectance.bare_bands`), as `patch_radiance` gives a
+            bare layer at c̄_k.
     """
     cos_o = jnp.sum(normal * view, axis=-1)
     up = cos_o > 0
@@ -131,9 +135,11 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
     obs = cross_band_name(observer) if cross_band else observer
     # Σ_c R_jc P_c: the cross-band table read per light channel in place (`lut.read_parts(
     # channel=...)`); three strided copies (`split_by_light`) made in every chunk cost 8 %
-    per_light = cross_band and shat == "lut"
+    per_light = cross_band and shat == "lut" and layer != "bare"
     bands = functools.partial(bin_bands, observer=obs, terms=terms, shat=shat, lut=lut,
                               arithmetic=arithmetic)
+    if layer == "bare":  # no film: R₁₃(c) Ŝ_jc(0), no series, no spread
+        bands = functools.partial(_bare_bin, observer=obs, shat=shat, arithmetic=arithmetic)
 
     def under_light(film, c, s, light):  # the bin's film × its radiance P_k (..., 3)
         if per_light:
@@ -145,6 +151,11 @@ def improved_envmap(film: Film, alpha, normal, view, pref, table: BinTable, *,
 
     out = scan_bins(film, cb, sb, under_light, extra=light)  # Σ_k (..., J)
     return jnp.where(up[..., None], a[..., None] * out * (1.0 / cb.shape[-1]), 0.0)
+
+
+def _bare_bin(film, c, s, *, observer, shat, arithmetic):
+    """A bin's bands of a bare layer (d = 0): R₁₃(c̄) Ŝ_j(0), whatever the spread s."""
+    return bare_bands(film, c, observer, shat=shat, arithmetic=arithmetic)
 
 
 def bin_radiance_parts(pref: PrefilteredEnvMap, table, normal, view, cos_o, alpha, spread, *,

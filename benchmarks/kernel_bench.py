@@ -87,7 +87,24 @@ def load_package(path, alias: str = "thinfilm_jax_baseline"):
     mod = importlib.util.module_from_spec(spec)
     sys.modules[alias] = mod
     spec.loader.exec_module(mod)
+    _resolve_own_methods(mod)
     return mod
+
+
+def _resolve_own_methods(pkg) -> None:
+    """Bind the method registry of a checkout loaded under another name to its own modules.
+    A registry (``core.methods``) before 2026-12-06 imported each row's implementation as
+    ``thinfilm_jax.<module>``, which under an alias is this checkout's code: its map path
+    then called the current method objects with its own configuration tuple. Resolving every
+    row here, from the alias, gives each checkout its own methods."""
+    methods = _module(pkg, "core.methods")
+    if methods is None or not hasattr(methods, "_RESOLVED"):
+        return
+    for name, row in methods.METHODS.items():
+        if isinstance(row.impl, str):
+            module, attr = row.impl.split(":")
+            methods._RESOLVED[name] = getattr(importlib.import_module(f"{pkg.__name__}.{module}"),
+                                              attr)
 
 
 def _module(pkg, *names):

@@ -173,3 +173,29 @@ def test_grey_method_through_a_fit_and_a_render(grey, tmp_path):
     centre = img[img.shape[0] // 2, img.shape[1] // 2]
     normal_view = GREY * float(tf.albedo(0.0, 0.25, quadrature=(48, 48)))
     np.testing.assert_allclose(centre, normal_view, rtol=2e-2)
+
+
+def test_rows_resolve_within_the_package_they_were_imported_with():
+    """A copy of the package imported under another name (how `benchmarks.kernel_bench` times
+    an older checkout beside this one) resolves its rows to its own modules: the map path of
+    one version must never call another version's method objects (their configuration tuples
+    differ: it failed with "not enough values to unpack")."""
+    import importlib
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    alias = "thinfilm_jax_registry_alias"
+    root = Path(tf.__file__).parent
+    spec = importlib.util.spec_from_file_location(alias, root / "__init__.py",
+                                                  submodule_search_locations=[str(root)])
+    sys.modules[alias] = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(sys.modules[alias])
+        copy = importlib.import_module(f"{alias}.core.methods")
+        for name in ("ideal", "improved"):
+            assert type(copy.implementation(name)).__module__.startswith(f"{alias}."), name
+            assert type(methods.implementation(name)).__module__.startswith("thinfilm_jax."), name
+    finally:
+        for key in [k for k in sys.modules if k == alias or k.startswith(f"{alias}.")]:
+            del sys.modules[key]

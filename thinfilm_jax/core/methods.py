@@ -172,7 +172,11 @@ def implementation(method: str):
         return impl
     if method not in _RESOLVED:
         module, attr = impl.split(":")
-        _RESOLVED[method] = getattr(importlib.import_module(f"thinfilm_jax.{module}"), attr)
+        # relative to this package, whatever name it was imported under (a study may load an
+        # older checkout beside this one under another name: its rows must resolve to its own
+        # modules, not to those of the package called thinfilm_jax)
+        package = __name__.rpartition(".core.")[0]
+        _RESOLVED[method] = getattr(importlib.import_module(f"{package}.{module}"), attr)
     return _RESOLVED[method]
 
 

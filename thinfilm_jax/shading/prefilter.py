@@ -314,8 +314,13 @@ def albedo_coordinate(u, sqrt_alpha, xp=jnp):
 
     t(0) = 0, t(1) = 1, increasing; u = k t / (1 + k − t) inverts it. c = 1 of 0.5, 1, 2
     (worst read error at θ_o ≥ 88° on the 64 × 33 table: 5.4e-4, 5.3e-4, 7.8e-4)."""
-    k = ALBEDO_WARP * xp.maximum(sqrt_alpha, float(np.sqrt(ALBEDO_MIN_ALPHA)))
+    k = _albedo_k(sqrt_alpha, xp)
     return u * (1 + k) / (u + k)
+
+
+def _albedo_k(sqrt_alpha, xp):
+    """k = c max(√α, √α_min) of `albedo_coordinate` (and of its inverse in `albedo_table`)."""
+    return ALBEDO_WARP * xp.maximum(sqrt_alpha, float(np.sqrt(ALBEDO_MIN_ALPHA)))
 
 
 @functools.cache
@@ -334,7 +339,7 @@ def albedo_table(n_u: int = 64, n_a: int = 33) -> np.ndarray:
     The read costs one division more than uniform u (t), at the same two-by-two taps."""
     t = np.linspace(0.0, 1.0, n_u)[:, None]
     sqa = np.linspace(0.0, 1.0, n_a)[None, :]
-    k = ALBEDO_WARP * np.maximum(sqa, np.sqrt(ALBEDO_MIN_ALPHA))
+    k = _albedo_k(sqa, np)
     u = k * t / (1 + k - t)  # the inverse of `albedo_coordinate`
     theta = np.arccos(np.clip(u * u, 0.0, 1.0))
     return np.asarray(albedo(theta, np.broadcast_to(np.maximum(sqa**2, ALBEDO_MIN_ALPHA),

@@ -65,3 +65,44 @@ def test_host_tables_cached_next_to_the_compilation_cache(tmp_path):
         assert calls == [1.0, 1.0, 2.0, 1.0]
     finally:
         jax.config.update("jax_compilation_cache_dir", os.environ["THINFILM_JAX_TEST_CACHE"])
+
+
+def test_host_table_computed_once_by_processes_that_share_the_folder(tmp_path):
+    """Two callers that miss the same table together: the second waits for the first's file
+    (a lock on it, `compilation_cache._table_lock`) instead of computing the table beside it.
+    Threads stand in for the test workers (`flock` locks conflict between open files, in one
+    process or two)."""
+    import threading
+    import time
+
+    import jax
+    import numpy as np
+
+    from thinfilm_jax.core.compilation_cache import cached_host_tables
+
+    src = tmp_path / "src.py"
+    src.write_text("a = 1\n")
+    calls, started, results = [], threading.Event(), {}
+
+    def compute():
+        calls.append(1)
+        started.set()
+        time.sleep(0.5)  # the second caller arrives while this one computes
+        return (np.arange(4.0),)
+
+    def caller(name):
+        results[name] = cached_host_tables("t", (1,), (src,), compute)
+
+    jax.config.update("jax_compilation_cache_dir", str(tmp_path / "cache"))
+    try:
+        first = threading.Thread(target=caller, args=("first",))
+        first.start()
+        assert started.wait(30)
+        second = threading.Thread(target=caller, args=("second",))
+        second.start()
+        first.join(30)
+        second.join(30)
+    finally:
+        jax.config.update("jax_compilation_cache_dir", os.environ["THINFILM_JAX_TEST_CACHE"])
+    assert len(calls) == 1
+    assert np.array_equal(results["first"][0], results["second"][0])

@@ -24,6 +24,7 @@ Example:
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -65,6 +66,9 @@ def cached_host_tables(name: str, key: tuple, sources: tuple, compute):
     The file name hashes `key` (the tables' arguments), the JAX version and the source text of
     the `sources` files, so a change of either recomputes. Written atomically; a file that
     cannot be read or written is recomputed, never an error (the cache is an optimisation).
+    Processes that share the folder compute a table once between them: the first to miss
+    holds a lock (`_table_lock`) while it computes, and the others wait for its file instead
+    of computing the same table beside it (two test workers, or notebooks started together).
     """
     import hashlib
 
@@ -79,15 +83,46 @@ def cached_host_tables(name: str, key: tuple, sources: tuple, compute):
     for src in sources:
         h.update(Path(src).read_bytes())
     path = Path(folder) / "host_tables" / f"{name}-{h.hexdigest()[:24]}.npz"
-    try:
-        with np.load(path) as f:
-            return tuple(f[f"a{i}"] for i in range(len(f.files)))
-    except (OSError, ValueError, KeyError):
-        pass
-    out = tuple(np.asarray(x) for x in compute())
-    try:
-        atomic_write(path, lambda tmp: np.savez(tmp, **{f"a{i}": x for i, x in enumerate(out)}),
-                     suffix=".npz")
-    except OSError:
-        pass
+
+    def read():
+        try:
+            with np.load(path) as f:
+                return tuple(f[f"a{i}"] for i in range(len(f.files)))
+        except (OSError, ValueError, KeyError):
+            return None
+
+    out = read()
+    if out is not None:
+        return out
+    with _table_lock(path):
+        out = read()  # written by the process that held the lock before us
+        if out is not None:
+            return out
+        out = tuple(np.asarray(x) for x in compute())
+        try:
+            atomic_write(path, lambda tmp: np.savez(tmp, **{f"a{i}": x
+                                                            for i, x in enumerate(out)}),
+                         suffix=".npz")
+        except OSError:
+            pass
     return out
+
+
+@contextlib.contextmanager
+def _table_lock(path: Path):
+    """An exclusive advisory lock on ``path.lock`` (POSIX `fcntl.flock`), released on exit, by
+    the process's death too; where none can be taken (no `fcntl`, a read-only folder) it
+    does nothing: a table computed twice is slower, never wrong."""
+    try:
+        import fcntl
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(f"{path}.lock", os.O_RDWR | os.O_CREAT, 0o644)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing releases the lock

@@ -31,6 +31,7 @@ from ..optics.fresnel import safe_div, safe_sqrt
 __all__ = ["BinTable", "bin_table", "prefilter_kernel", "DEFAULT_BINS"]
 
 DEFAULT_BINS = 3
+HI = jax.lax.Precision.HIGHEST  # the host fits' contractions (GPUs default to TF32)
 TABLE_SHAPE = (64, 33)  # (√cos θ_o, √α) nodes, as the albedo table
 TABLE_QUADRATURE = (96, 96)  # half-vector quadrature of the table build
 ALPHA_FLOOR = 1e-4  # quadrature floor of α (the √α = 0 column is the exact mirror limit)
@@ -197,39 +198,50 @@ def _fit_reads(theta_o, alpha, x0, grid, iterations, moments, weight, ndf):
         sb = jnp.clip(h * sin_o, -1.0, 1.0)
         return jnp.stack([-sb, zero, safe_sqrt(1 - sb * sb)])
 
+    def column(h, s):  # one read's normalised kernel k̂ on the grid, times √dω
+        a = jnp.maximum(s * s, ALPHA_FLOOR)
+        k_a = prefilter_kernel(jnp.matmul(d, direction(h), precision=HI), a)
+        return k_a / _kernel_integrals(a)[0] * sq
+
     def resid(x):
-        m = 0.0
-        for b in range(k):
-            a = jnp.maximum(x[2 * b + 1] ** 2, ALPHA_FLOOR)
-            m = m + prefilter_kernel(d @ direction(x[2 * b]), a) / _kernel_integrals(a)[0]
-        return target - m * sq / k
+        return target - jnp.sum(jax.vmap(column)(x[0::2], x[1::2]), axis=0) / k
 
     eps = jnp.maximum(1e-3 * jnp.max(jnp.abs(target)), 1e-12)
     fl = [d[:, 0], d[:, 2]] + ([d[:, 0] ** 2, d[:, 2] ** 2, d[:, 0] * d[:, 2]]
                                if moments > 1 else [])
     feats = jnp.stack(fl, -1) * sq[:, None]
 
-    def rows(x, u):  # the L1 rows (reweighted) and the moments' penalty rows
-        r = resid(x)
-        return jnp.concatenate([r * u, weight * (r @ feats)]) if moments else r * u
+    def rows(r, u):  # the L1 rows (reweighted) and the moments' penalty rows of residuals r
+        if not moments:
+            return r * u
+        return jnp.concatenate([r * u, weight * jnp.matmul(r, feats, precision=HI)])
+
+    def jacobian(x, u):  # ∂rows/∂x: read b moves only its own column (2 tangents a read,
+        # not 2K through every read: the fit of g·K reads costs ∝ K, not K²)
+        dh, ds = jax.vmap(jax.jacfwd(column, argnums=(0, 1)))(x[0::2], x[1::2])  # (K, G)
+        jr = -jnp.stack([dh, ds], 1).reshape(2 * k, -1).T / k  # (G, 2K), as x: h₀, s₀, h₁ …
+        if not moments:
+            return jr * u[:, None]
+        return jnp.concatenate([jr * u[:, None], weight * jnp.matmul(feats.T, jr, precision=HI)])
 
     def step(carry, _):
         x, lam = carry
         r = resid(x)
         u = jax.lax.stop_gradient(jax.lax.rsqrt(jnp.sqrt(r * r + eps * eps)))
-        jac = jax.jacfwd(rows)(x, u)
-        ru = rows(x, u)
-        h = jac.T @ jac
-        dx = -jnp.linalg.solve(h + lam * jnp.diag(jnp.diag(h) + 1e-12), jac.T @ ru)
+        jac = jacobian(x, u)
+        ru = rows(r, u)
+        h = jnp.matmul(jac.T, jac, precision=HI)
+        dx = -jnp.linalg.solve(h + lam * jnp.diag(jnp.diag(h) + 1e-12),
+                               jnp.matmul(jac.T, ru, precision=HI))
         xn = x + dx
         xn = xn.at[1::2].set(jnp.clip(xn[1::2], 0.01, 1.0))
-        better = jnp.sum(rows(xn, u) ** 2) < jnp.sum(ru * ru)
+        better = jnp.sum(rows(resid(xn), u) ** 2) < jnp.sum(ru * ru)
         return (jnp.where(better, xn, x), jnp.where(better, lam / 3, lam * 4)), None
 
     (x, _), _ = jax.lax.scan(step, (x0, jnp.asarray(1e-2, dt)), None, length=iterations)
     x = x.reshape(k, 2)
     z, zt, _ = jax.vmap(_kernel_integrals)(jnp.maximum(x[:, 1] ** 2, ALPHA_FLOOR))
-    key = (zt / z) * (jax.vmap(direction)(x[:, 0]) @ wo)
+    key = (zt / z) * jnp.matmul(jax.vmap(direction)(x[:, 0]), wo, precision=HI)
     return x[jnp.argsort(key)].reshape(-1)
 
 

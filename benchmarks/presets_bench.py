@@ -3,12 +3,15 @@ against `ideal` and `filtered` in one process.
 
 Each method is ``jax.jit(lambda n, v: envmap_radiance(film, 0.25, n, v, prefiltered,
 method=m, options=...))`` on 2²⁰ random front-facing normals and views in float32, under
-``venice_sunset`` box-filtered to 64 × 128 (so the map is no cache burden), the film
-Figure 4's (d = 600 nm, η₂ = 1.33, η₃ = 1.5); after one call that compiles, five calls
-interleaved across the methods, their median.
+``venice_sunset`` box-filtered to 64 × 128 (so the map is no cache burden), after one call
+that compiles, five calls interleaved across the methods, their median; for two films
+(`FILMS`), each timed against `filtered` on the same film: Figure 4's dielectric film
+(d = 600 nm, η₂ = 1.33, η₃ = 1.5), which ``arithmetic="auto"`` shades in real arithmetic,
+and the same film on an absorbing base (η₃ = 2.0 + 0.5i, the kernel bench's), which needs
+complex Fresnel arithmetic, once per bin of `improved` (K times) and once for `filtered`.
 
 ``python -m benchmarks.presets_bench [--points 1048576] [--out figures]`` writes
-``presets_bench.json`` and prints a table (≈ 3 min on a 2-core CPU, the compilations
+``presets_bench.json`` and prints a table (≈ 6 min on a 2-core CPU, the compilations
 included).
 """
 
@@ -21,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+#: the films timed: (d nm, η₂, η₃, κ₃)
+FILMS = {"dielectric": (600.0, 1.33, 1.5, 0.0), "absorbing base": (600.0, 1.33, 2.0, 0.5)}
 CASES = (("ideal", None), ("filtered", None), ("improved", "fast"), ("improved", "default"),
          ("improved", "accurate"))
 
@@ -34,9 +39,7 @@ def run(points: int = 1 << 20, repeats: int = 5) -> dict:
     import jax.numpy as jnp
 
     from thinfilm_jax.core.film import Film
-    from thinfilm_jax.realtime.options import ModelOptions
     from thinfilm_jax.shading.envmap import load_envmap
-    from thinfilm_jax.shading.ibl import envmap_radiance
     from thinfilm_jax.shading.prefilter import prefilter_envmap
 
     px = np.asarray(load_envmap("venice_sunset").radiance)
@@ -50,7 +53,26 @@ def run(points: int = 1 << 20, repeats: int = 5) -> dict:
     v = _unit(n + 0.8 * _unit(rng.normal(size=(points, 3))))
     v = np.where((np.sum(n * v, -1) > 0)[:, None], v, n)
     n, v = jnp.asarray(n, jnp.float32), jnp.asarray(v, jnp.float32)
-    film = Film(jnp.float32(600.0), jnp.float32(1.33), jnp.float32(1.5))
+    from ._timing import environment
+
+    out = {"points": points, "repeats": repeats, "machine": platform.processor() or
+           platform.machine(), "devices": [str(d) for d in jax.devices()],
+           "environment": environment(), "films": {}}
+    for name, (d, eta2, eta3, kappa3) in FILMS.items():
+        film = Film(*(jnp.float32(x) for x in (d, eta2, eta3, kappa3)))
+        out["films"][name] = {"film": dict(thickness=d, eta_film=eta2, eta_base=eta3,
+                                           kappa_base=kappa3),
+                              "rows": _time_methods(film, pref, n, v, points, repeats)}
+    return out
+
+
+def _time_methods(film, pref, n, v, points, repeats) -> dict:
+    """Each of `CASES` on one film: first call (compiles), then `repeats` interleaved calls."""
+    import jax
+
+    from thinfilm_jax.realtime.options import ModelOptions
+    from thinfilm_jax.shading.ibl import envmap_radiance
+
     fns, rows = {}, {}
     for m, q in CASES:
         kw = {} if q is None else {"options": ModelOptions.preset(q)}
@@ -69,8 +91,7 @@ def run(points: int = 1 << 20, repeats: int = 5) -> dict:
     for r in rows.values():
         med = float(np.median(r["warm_s"]))
         r.update(median_s=med, ns_per_point=med / points * 1e9, x_filtered=med / base)
-    return {"points": points, "repeats": repeats, "machine": platform.processor() or
-            platform.machine(), "devices": [str(d) for d in jax.devices()], "rows": rows}
+    return rows
 
 
 def main(argv=None) -> int:
@@ -82,9 +103,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     res = run(args.points)
     write_json(Path(args.out) / "presets_bench.json", res)
-    for key, r in res["rows"].items():
-        print(f"{key:20s} {r['ns_per_point']:8.1f} ns a point  {r['x_filtered']:.2f}× filtered"
-              f"  (first call {r['first_call_s']:.1f} s)")
+    for film, f in res["films"].items():
+        for key, r in f["rows"].items():
+            print(f"{film:15s} {key:20s} {r['ns_per_point']:8.1f} ns a point  "
+                  f"{r['x_filtered']:.2f}× filtered  (first call {r['first_call_s']:.1f} s)")
     return 0
 
 

@@ -33,10 +33,11 @@ specialisations change no result beyond rounding, except that a bare film gets t
 R₁₃ Ŝ_j(0) where the Fourier methods would truncate at M terms. The observer is not a field: it is
 the keyword ``observer=`` of every public function (SPEC §8).
 
-``bins`` trades accuracy for cost in `improved`: measured under maps
-(docs/studies/improved.md, "Choosing K"), K = 2 costs ≈ 1.5× `filtered` a point, K = 3 (the
-default) ≈ 2.3× and K = 4 ≈ 2.9×, with the error falling as K grows. Each K builds its own
-(θ_o, α) table once (≈ 15 s on a 2-core CPU, then cached with the compiled programs).
+``bins`` trades accuracy for cost in `improved`: each bin adds ≈ 100 ns a point under a map,
+≈ 0.6× `filtered`'s whole point (docs/studies/performance.md, "Where `improved`'s cost lies";
+the costs of K = 2 and 3 are the presets' below), with the error falling as K grows
+(docs/studies/improved.md, "Choosing K"). Each K builds its own (θ_o, α) table once
+(≈ 15 s on a 2-core CPU, then cached next to the compiled programs).
 ``light_spread=True`` also reads each bin's light-weighted spread of the incidence cosine
 from the prefiltered second moments (`methods.improved.bin_radiance_parts`): ≈ 1.18× the cost of
 `improved` under a map for ≈ 6 % lower mean ΔE₀₀ over the small-sources study's renders
@@ -49,16 +50,18 @@ default); its measured errors are in docs/studies/improved.md, "Choosing K". Und
 light it changes nothing.
 
 Three named quality settings of `improved` (`ModelOptions.preset(name)`, the render CLI's
-``--quality``), measured in one run (figures/improved_bins.md; docs/studies/improved.md,
-"Choosing K"): cost a shading point under a map against `filtered`'s (float32, 2¹⁸ points,
-jitted, a 2-core CPU) and the error over the 18 renders of the small-sources study (the
-worst ratio of mean ΔE₀₀ to `filtered`'s, and how many renders stay above 3 mean ΔE₀₀):
+``--quality``): cost a shading point under a map against `filtered`'s (float32, 2¹⁸ points of
+absorbing films, jitted, a 2-core CPU: figures/method_cost.md, the one table of costs;
+through the public call at 2²⁰ points on a dielectric film, figures/presets_bench.json: 1.50×,
+2.30×, 5.57×; docs/studies/performance.md) and the error over the 18 renders of the
+small-sources study (the worst ratio of mean ΔE₀₀ to `filtered`'s, and how many renders stay
+above 3 mean ΔE₀₀: figures/improved_bins.md; docs/studies/improved.md, "Choosing K"):
 
 | preset | options | cost ÷ `filtered` | worst ΔE₀₀ ratio / renders > 3 |
 |---|---|---|---|
-| "fast" | ``bins=2`` | 1.50× | 0.84 / 5 |
-| "default" | ``ModelOptions()`` (K = 3) | 2.32× | 0.70 / 2 |
-| "accurate" | ``bin_reads=3`` (K = 3) | 4.64× | 0.56 / 0 |
+| "fast" | ``bins=2`` | 1.69× | 0.84 / 5 |
+| "default" | ``ModelOptions()`` (K = 3) | 2.56× | 0.70 / 2 |
+| "accurate" | ``bin_reads=3`` (K = 3) | 5.66× | 0.56 / 0 |
 
 Under uniform light (`patch_radiance`) only K acts: "fast" is about 1.6× less accurate
 than "default" there, and "accurate" is "default" (docs/improved.md).

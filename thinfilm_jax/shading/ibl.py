@@ -73,7 +73,7 @@ from .envmap import EnvMap, load_envmap
 from .ibl_reference import auto_subdivisions, exact_radiance  # noqa: F401 (re-exported)
 from .material_ibl import MATERIAL_ENVMAP_METHODS as MATERIAL_METHODS
 from .material_ibl import material_envmap_radiance
-from .methods import DEFAULT_SOURCES  # noqa: F401 (re-exported)
+from .methods import DEFAULT_SOURCES, MapConfig  # noqa: F401 (DEFAULT_SOURCES re-exported)
 from .methods.filtered import MAP_SHAT_READ  # noqa: F401 (re-exported)
 from .methods.improved import improved_envmap  # noqa: F401 (re-exported)
 from .prefilter import PrefilteredEnvMap, prefilter_envmap
@@ -248,8 +248,8 @@ def _one_film_envmap(film, alpha, normal, view, envmap, method, observer, *, opt
     if realtime:
         if shat == "lut" and pref.lut.table.shape[-1] != 3 * get_observer(observer).n_bands:
             raise ValueError("the PrefilteredEnvMap was built for another observer")
-        cfg = (method, observer, terms, shat, bool(cross_band), arithmetic,
-               m.map_static(options), layer)
+        cfg = MapConfig(method, observer, terms, shat, bool(cross_band), arithmetic,
+                        m.map_static(options), layer)
         pref = m.envmap_tables(pref, options, dtype)  # e.g. `improved`'s (θ_o, α) tables
         return _realtime_jit(film, alpha, *nv, pref, cfg, int(batch_size or 65536))
     return exact_radiance(film, alpha, *nv, env, method=method, observer=observer,
@@ -337,4 +337,4 @@ def _chunk(xs, pref, cfg):
 def _realtime_points(film, alpha, normal, view, pref, cfg):
     """The map's method plus the sources split from it (if any), at flat shading points: the
     method object's `map_points` (`shading.methods`)."""
-    return implementation(cfg[0]).map_points(film, alpha, normal, view, pref, cfg)
+    return implementation(cfg.method).map_points(film, alpha, normal, view, pref, cfg)

@@ -12,7 +12,7 @@ and batch; what differs between methods is asked of the method object:
 | ``envmap_kind`` | `envmap_radiance` | "realtime" (reads a `PrefilteredEnvMap`), "exact" (integrates an `EnvMap`), "table" (a `ColourTable`) |
 | ``envmap_tables(pref, options, dtype)`` | `envmap_radiance` | what travels with the prefiltered map into the jit |
 | ``map_static(options)`` | `envmap_radiance` | the method's static options in the jit's configuration |
-| ``map_points(film, α, n, ω_o, pref, cfg)`` | `ibl._realtime_points` | flat shading points → (P, J), sources included |
+| ``map_points(film, α, n, ω_o, pref, cfg)`` | `ibl._realtime_points` | flat shading points → (P, J), sources included (``cfg``: a `MapConfig`) |
 | ``envmap_stack(...)`` | `envmap_radiance` | a `Stack` or dispersive film under a map (methods of exact dispersion) |
 | ``monte_carlo`` | the exact drivers | the sampled rule instead of the quadrature |
 | ``rgb(film, cos θ, observer, terms, shat, arithmetic, layer)`` | `rgb_reflectance` | the band reflectances at one cosine (a method whose row lists "rgb"; the methods of `rgb_reflectance` only are `spectral.reflectance.BandMethod`s) |
@@ -31,6 +31,8 @@ Example:
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax.numpy as jnp
 
 from ...core.material import expand_batch
@@ -41,6 +43,20 @@ from ..prefilter import lookup_albedo, lookup_prefiltered
 from ..sources import source_radiance
 
 DEFAULT_SOURCES = 4  # suns split from a map that `improved` prefilters itself
+
+
+class MapConfig(NamedTuple):
+    """The static configuration of `envmap_radiance`'s real-time jit (hashable: a static
+    argument), what the method hooks under a map read by name."""
+
+    method: str
+    observer: str
+    terms: int
+    shat: str  # "lut", "exact" or "gaussian" (resolved)
+    cross_band: bool
+    arithmetic: str  # "real" or "complex" (resolved)
+    static: object  # the method's own static options (`ShadingMethod.map_static`)
+    layer: str  # "film" or "bare" (resolved)
 
 
 class ShadingMethod:
@@ -92,19 +108,19 @@ class ShadingMethod:
 def shat_lut(pref, cfg, dtype):
     """The Ŝ table a real-time method reads: the map's cross-band one, the plain bands' one
     on the diagonal path, None for another Ŝ source."""
-    observer, shat, cross = cfg[1], cfg[3], cfg[4]
-    return pref.lut if cross else (build_shat_lut(observer, dtype=dtype)
-                                   if shat == "lut" else None)
+    if cfg.cross_band:
+        return pref.lut
+    return build_shat_lut(cfg.observer, dtype=dtype) if cfg.shat == "lut" else None
 
 
 def with_sources(out, film, alpha, normal, view, pref, cfg):
     """`out` plus the suns split from the map (`sources.source_radiance`), if any."""
-    _, observer, terms, shat, cross, arithmetic = cfg[:6]
     if pref.has_sources:
         lut = shat_lut(pref, cfg, alpha.dtype)
         out = out + source_radiance(film, alpha, normal, view, pref.sources,
-                                    observer=observer, terms=terms, shat=shat, lut=lut,
-                                    arithmetic=arithmetic, cross_band=cross)
+                                    observer=cfg.observer, terms=cfg.terms, shat=cfg.shat,
+                                    lut=lut, arithmetic=cfg.arithmetic,
+                                    cross_band=cfg.cross_band)
     return out
 
 
@@ -112,7 +128,7 @@ class SplitSum(ShadingMethod):
     """A split-sum method under a map: A(θ_o, α) Σ_k R_jk P_k(ω_r, α) (module docstring);
     a subclass gives R through `bands_per_light` (Σ_k R_jk P_k read per light channel) and
     `bands` (R_j or R_jk, per moment channel where the map has them), and for a bare layer
-    (d = 0, ``cfg[7] == "bare"``: `reflectance.choose_layer`) the incidence cosine of its
+    (d = 0, ``cfg.layer == "bare"``: `reflectance.choose_layer`) the incidence cosine of its
     exact R₁₃ Ŝ_jk(0) through `bare_cos`, as its uniform-light `patch_point` does."""
 
     envmap_kind = "realtime"
@@ -129,7 +145,9 @@ class SplitSum(ShadingMethod):
         raise NotImplementedError
 
     def map_light(self, film, alpha, normal, view, pref, cfg):
-        _, observer, terms, shat, cross, arithmetic, _, layer = cfg
+        observer, terms, shat, arithmetic, layer = (cfg.observer, cfg.terms, cfg.shat,
+                                                    cfg.arithmetic, cfg.layer)
+        cross = cfg.cross_band
         cos_o = jnp.sum(normal * view, axis=-1)
         up = cos_o > 0
         co = jnp.where(up, cos_o, 1.0)

@@ -78,12 +78,12 @@ class Improved(ShadingMethod):
         return pref[0]
 
     def map_light(self, film, alpha, normal, view, pref, cfg):
-        _, observer, terms, shat, cross, arithmetic, light_spread, layer = cfg
         pref, table = pref
-        return improved_envmap(film, alpha, normal, view, pref, table, observer=observer,
-                               terms=terms, shat=shat, lut=shat_lut(pref, cfg, alpha.dtype),
-                               arithmetic=arithmetic, cross_band=cross,
-                               light_spread=light_spread, layer=layer)
+        return improved_envmap(film, alpha, normal, view, pref, table, observer=cfg.observer,
+                               terms=cfg.terms, shat=cfg.shat,
+                               lut=shat_lut(pref, cfg, alpha.dtype), arithmetic=cfg.arithmetic,
+                               cross_band=cfg.cross_band, light_spread=cfg.static,
+                               layer=cfg.layer)
 
 
 IMPROVED = Improved()

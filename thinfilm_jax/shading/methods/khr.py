@@ -39,7 +39,7 @@ class KhrMethod(ShadingMethod):
     def map_points(self, film, alpha, normal, view, pref, cfg):
         """Per channel, Rec. 709 F_iridescence(cos θ_o) × (A · the prefiltered map's RGB +
         the split suns' Σ_s m_s L_s), then to the bands (module docstring)."""
-        observer = cfg[1]
+        observer = cfg.observer
         cos_o = jnp.sum(normal * view, axis=-1)
         up = cos_o > 0
         co = jnp.where(up, cos_o, 1.0)

@@ -60,9 +60,10 @@ The fit, in the order it runs:
    disagree by two fringe-order separations, for an unknown camera beyond the pads' span,
    or, for a JPEG, more than 10 nm off the plane of its 5 × 5 neighbourhood (its block
    error, which χ² and σ_d do not see: `fit.photo_flags`). A robust reduced χ² (the median
-   pixel's χ² over the median of χ²₂) above `chi2_warn` raises a warning (in the result and by `warnings.warn`): the model does not
-   explain the photograph (wrong encoding, camera, light, angle or material). It is robust
-   so that a few outlying pixels (an edge, a scratch) do not raise it.
+   pixel's χ² over the median of χ²₂) above `chi2_warn` raises a warning (in the result and
+   by `warnings.warn`): the model does not explain the photograph (wrong encoding, camera,
+   light, angle or material). It is robust so that a few outlying pixels (an edge, a
+   scratch) do not raise it.
 
 Limits. Colours depend on the film's index and thickness mostly through n₂·d: with the wrong
 film index the map scales by the ratio of the indices while χ² barely rises (SiO₂ declared

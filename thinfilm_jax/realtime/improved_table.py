@@ -217,12 +217,11 @@ def _fit_reads(theta_o, alpha, x0, grid, iterations, moments, weight, ndf):
         return jnp.concatenate([r * u, weight * jnp.matmul(r, feats, precision=HI)])
 
     def jacobian(x, u):  # ∂rows/∂x: read b moves only its own column (2 tangents a read,
-        # not 2K through every read: the fit of g·K reads costs ∝ K, not K²)
+        # not 2K through every read: the fit of g·K reads costs ∝ K, not K²); `rows` is
+        # linear in r, so its Jacobian is `rows` of each column of ∂r/∂x
         dh, ds = jax.vmap(jax.jacfwd(column, argnums=(0, 1)))(x[0::2], x[1::2])  # (K, G)
-        jr = -jnp.stack([dh, ds], 1).reshape(2 * k, -1).T / k  # (G, 2K), as x: h₀, s₀, h₁ …
-        if not moments:
-            return jr * u[:, None]
-        return jnp.concatenate([jr * u[:, None], weight * jnp.matmul(feats.T, jr, precision=HI)])
+        dr = -jnp.stack([dh, ds], 1).reshape(2 * k, -1) / k  # (2K, G), as x: h₀, s₀, h₁ …
+        return jax.vmap(rows, in_axes=(0, None), out_axes=1)(dr, u)
 
     def step(carry, _):
         x, lam = carry

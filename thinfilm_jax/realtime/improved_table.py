@@ -353,8 +353,8 @@ def bin_table(bins: int = DEFAULT_BINS, *, reads: int = 1,
         ndf: "ggx" or "beckmann".
         dtype: float dtype of the table.
     Cost: n_u · n_a quadratures of n_u·n_φ nodes and the reads' fit, ∝ the number of reads
-    (≈ 18 s on a quiet 2-core CPU for the default, compilation included; 29 s with
-    ``reads=3``), once per process; once per cache folder when JAX's persistent compilation
+    (≈ 15 s on a 2-core CPU for the default, compilation included; 23 s with ``reads=3``),
+    once per process; once per cache folder when JAX's persistent compilation
     cache is on.
     Computed in float64 when enabled, else in float32.
     """
